@@ -1,0 +1,21 @@
+"""ctseg: segmented triangle meshes from X-ray CT images (Yang et al. 2014, and beyond).
+
+Each stage is a plain function on numpy arrays; :func:`segment_image` runs them all.
+"""
+from .density import density_map
+from .errors import CTSegError, InputError, MeshCheckError, ParameterError
+from .sites import initial_sites, random_sites, density_random_sites, ward_sites
+from .cvt import lloyd_cvt, CVTResult
+from .triangulation import delaunay_mesh, TriangleMesh
+from .triangle_gray import triangle_gray
+from .graphcut import graphcut_split
+from .materials import segment_triangles
+from .pipeline import SegmentedMesh, default_n_sites, segment_image
+
+__version__ = "0.1.0"
+__all__ = [
+    "density_map", "initial_sites", "random_sites", "density_random_sites", "ward_sites",
+    "lloyd_cvt", "CVTResult", "delaunay_mesh", "TriangleMesh", "triangle_gray",
+    "graphcut_split", "segment_triangles", "segment_image", "SegmentedMesh",
+    "default_n_sites", "CTSegError", "InputError", "ParameterError", "MeshCheckError",
+]

@@ -1,0 +1,53 @@
+"""Input checks shared by the stages: one place that turns bad input into a clear error."""
+import numbers
+
+import numpy as np
+
+from .errors import InputError, ParameterError
+
+
+def as_image(image, name="image", min_size=2):
+    """Return `image` as a finite float64 2D array, or raise InputError saying what is wrong."""
+    try:
+        arr = np.asarray(image)
+    except Exception as exc:  # e.g. ragged nested lists
+        raise InputError(f"{name}: cannot be read as an array ({exc})") from None
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
+        raise InputError(f"{name}: expected a numeric array, got dtype {arr.dtype}")
+    if np.iscomplexobj(arr):
+        raise InputError(f"{name}: complex values are not a CT image (dtype {arr.dtype})")
+    if arr.ndim != 2:
+        raise InputError(
+            f"{name}: expected a 2D array (rows, cols), got shape {arr.shape}; "
+            "process volumes slice by slice and convert colour images to one channel"
+        )
+    if arr.size == 0:
+        raise InputError(f"{name}: the array is empty (shape {arr.shape})")
+    if min(arr.shape) < min_size:
+        raise InputError(
+            f"{name}: shape {arr.shape} is too small; each side needs at least {min_size} pixels"
+        )
+    arr = arr.astype(np.float64)
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        r, c = np.argwhere(bad)[0]
+        raise InputError(
+            f"{name}: {int(bad.sum())} pixel(s) are NaN or infinite (first at row {r}, col {c})"
+        )
+    return arr
+
+
+def check_number(value, name, low=None, high=None, low_open=False, high_open=False,
+                 integer=False):
+    """Check a scalar parameter against its range and return it (as int or float)."""
+    kind = numbers.Integral if integer else numbers.Real
+    if isinstance(value, bool) or not isinstance(value, (kind, np.integer if integer else np.number)):
+        raise ParameterError(f"{name}: expected {'an integer' if integer else 'a number'}, got {value!r}")
+    value = int(value) if integer else float(value)
+    if not integer and not np.isfinite(value):
+        raise ParameterError(f"{name}: must be finite, got {value!r}")
+    if low is not None and (value < low or (low_open and value == low)):
+        raise ParameterError(f"{name}: must be {'>' if low_open else '>='} {low}, got {value!r}")
+    if high is not None and (value > high or (high_open and value == high)):
+        raise ParameterError(f"{name}: must be {'<' if high_open else '<='} {high}, got {value!r}")
+    return value

@@ -1,0 +1,77 @@
+"""Stage 1: the gradient density map that steers the CVT (paper 5.1, SPEC 1)."""
+import numpy as np
+from scipy import ndimage
+
+from ._validate import as_image, check_number
+
+
+def density_map(image, sigma=1.0, floor=0.02, saturation="auto"):
+    """Per-pixel density rho from the smoothed gradient magnitude.
+
+    ``rho = floor + min(1, g / g_ref)`` with ``g = |grad(G_sigma * I)|``. Large rho near
+    material boundaries draws CVT sites there, so small triangles hug the boundaries; the
+    floor keeps sites in flat regions. rho is uniform on each pixel (paper eq. 4).
+
+    With ``saturation=None``, ``g_ref = max g`` (the paper's and SPEC 1's normalisation).
+    On industrial scans this starves weak boundaries: a steel edge has ten to twenty times
+    the gradient of a polymer/air or aluminium/air edge, so those edges get a density barely
+    above the floor and few sites. The default ``'auto'`` saturates instead at
+    ``g_ref = max(10 * median(g), 0.02 * max(g))``: the median gradient measures the noise
+    (most pixels are inside a material), so every edge well above the noise gets the full
+    density whatever its contrast. A number sets ``g_ref`` as a fraction of ``max(g)``.
+    In 'auto' mode the noise gradient ``g_noise = 2 * median(g)`` is also subtracted,
+    ``rho = floor + clip((g - g_noise) / (g_ref - g_noise), 0, 1)`` with
+    ``g_ref = max(10 * g_noise, 0.02 * max(g))``, so that flat noisy regions fall back to
+    the floor instead of drawing sites away from the boundaries.
+
+    Parameters
+    ----------
+    image : (rows, cols) array_like
+        Gray image (any units: the result is normalised).
+    sigma : float, optional
+        Standard deviation of the Gaussian pre-smoothing, in pixels (0 disables it).
+    floor : float, optional
+        Density added everywhere, > 0.
+    saturation : {'auto', None} or float, optional
+        How the gradient is normalised (see above).
+
+    Returns
+    -------
+    rho : (rows, cols) float64 ndarray
+        Values in [floor, floor + 1]; a constant image gives ``floor`` everywhere.
+
+    Raises
+    ------
+    InputError
+        If the image is not a finite 2D numeric array of at least 2 x 2 pixels.
+    ParameterError
+        If ``sigma < 0``, ``floor <= 0`` or ``saturation`` is not 'auto', None or in (0, 1].
+
+    References
+    ----------
+    Yang et al. 2014, section 5.1 and eq. (4).
+    """
+    img = as_image(image)
+    sigma = check_number(sigma, "sigma", low=0.0)
+    floor = check_number(floor, "floor", low=0.0, low_open=True)
+    if saturation is not None and saturation != "auto":
+        saturation = check_number(saturation, "saturation", low=0.0, high=1.0, low_open=True)
+    # Normalise first so that huge value ranges (1e30) cannot overflow the gradient.
+    span = float(img.max() - img.min())
+    if span == 0.0:
+        return np.full(img.shape, floor)
+    img = (img - img.min()) / span
+    smooth = ndimage.gaussian_filter(img, sigma, mode="nearest") if sigma > 0 else img
+    gy, gx = np.gradient(smooth)
+    mag = np.hypot(gx, gy)
+    peak = mag.max()
+    if peak == 0.0:
+        return np.full(img.shape, floor)
+    if saturation is None:
+        return floor + mag / peak
+    if saturation == "auto":
+        g_noise = 2.0 * float(np.median(mag))
+        g_ref = max(10.0 * g_noise, 0.02 * peak)
+    else:
+        g_noise, g_ref = 0.0, saturation * peak
+    return floor + np.clip((mag - g_noise) / (g_ref - g_noise), 0.0, 1.0)

@@ -1,0 +1,159 @@
+"""numpy <-> VTK conversions that keep world geometry (origin, spacing, direction)."""
+from dataclasses import dataclass, field
+
+import numpy as np
+from vtkmodules.util import numpy_support
+from vtkmodules.vtkCommonCore import vtkPoints
+from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkImageData, vtkPolyData
+
+from ctseg.errors import InputError
+
+
+@dataclass
+class ImageGeometry:
+    """Index-to-world mapping of an image: world = origin + direction @ (index * spacing)."""
+
+    origin: tuple = (0.0, 0.0, 0.0)
+    spacing: tuple = (1.0, 1.0, 1.0)
+    direction: np.ndarray = field(default_factory=lambda: np.eye(3))
+
+    def __post_init__(self):
+        self.origin = tuple(float(v) for v in self.origin)
+        self.spacing = tuple(float(v) for v in self.spacing)
+        self.direction = np.asarray(self.direction, float).reshape(3, 3)
+        if len(self.origin) != 3 or len(self.spacing) != 3:
+            raise InputError("geometry: origin and spacing need 3 values each")
+        if not all(np.isfinite(self.spacing)) or min(self.spacing) <= 0:
+            raise InputError(f"geometry: spacing must be finite and > 0, got {self.spacing}")
+
+    def to_world(self, ijk):
+        ijk = np.asarray(ijk, float)
+        return np.asarray(self.origin) + (ijk * np.asarray(self.spacing)) @ self.direction.T
+
+
+def image_to_array(image):
+    """vtkImageData (one scalar component) -> (array, ImageGeometry).
+
+    A 2D image (z dimension 1) gives an array of shape (rows=ny, cols=nx), row j = VTK j;
+    a volume gives (nz, ny, nx). Multi-component scalars are refused here.
+    """
+    dims = image.GetDimensions()
+    scalars = image.GetPointData().GetScalars()
+    if scalars is None:
+        raise InputError("image: the vtkImageData has no point scalars")
+    if scalars.GetNumberOfComponents() != 1:
+        raise InputError(
+            f"image: {scalars.GetNumberOfComponents()} components per pixel; ctseg needs one "
+            "gray value per pixel (convert colour images to gray first)")
+    arr = numpy_support.vtk_to_numpy(scalars).reshape(dims[2], dims[1], dims[0])
+    if dims[2] == 1:
+        arr = arr[0]
+    direction = np.eye(3)
+    if hasattr(image, "GetDirectionMatrix"):
+        m = image.GetDirectionMatrix()
+        direction = np.array([[m.GetElement(r, c) for c in range(3)] for r in range(3)])
+    return arr.copy(), ImageGeometry(image.GetOrigin(), image.GetSpacing(), direction)
+
+
+def array_to_image(array, geometry=None, name="scalars"):
+    """(rows, cols) or (nz, rows, cols) array -> vtkImageData with the given geometry."""
+    arr = np.ascontiguousarray(array)
+    if arr.ndim == 2:
+        arr = arr[None]
+    if arr.ndim != 3:
+        raise InputError(f"image: expected a 2D or 3D array, got shape {arr.shape}")
+    geometry = geometry or ImageGeometry()
+    img = vtkImageData()
+    img.SetDimensions(arr.shape[2], arr.shape[1], arr.shape[0])
+    img.SetOrigin(geometry.origin)
+    img.SetSpacing(geometry.spacing)
+    if hasattr(img, "SetDirectionMatrix"):
+        img.SetDirectionMatrix(geometry.direction.ravel().tolist())
+    vtk_arr = numpy_support.numpy_to_vtk(arr.ravel(), deep=True)
+    vtk_arr.SetName(name)
+    img.GetPointData().SetScalars(vtk_arr)
+    return img
+
+
+def _points(xyz):
+    pts = vtkPoints()
+    pts.SetData(numpy_support.numpy_to_vtk(np.ascontiguousarray(xyz, dtype=np.float64), deep=True))
+    return pts
+
+
+def _cells(conn, size):
+    conn = np.asarray(conn, dtype=np.int64)
+    ca = vtkCellArray()
+    n = len(conn) // size if size else 0
+    offsets = np.arange(0, n * size + 1, size, dtype=np.int64)
+    ca.SetData(numpy_support.numpy_to_vtkIdTypeArray(offsets, deep=True),
+               numpy_support.numpy_to_vtkIdTypeArray(conn.astype(np.int64), deep=True))
+    return ca
+
+
+def _add_cell_array(poly, values, name, vtk_type=None):
+    arr = numpy_support.numpy_to_vtk(np.ascontiguousarray(values), deep=True,
+                                     array_type=vtk_type)
+    arr.SetName(name)
+    poly.GetCellData().AddArray(arr)
+
+
+def mesh_to_polydata(points, triangles, material, gray, geometry=None, slice_index=0,
+                     slice_axis_index=0.0):
+    """Triangle mesh in pixel-index coordinates -> vtkPolyData in world coordinates.
+
+    Cell arrays: ``material`` (int32), ``gray`` (float64, input units), ``slice`` (int32).
+    ``slice_axis_index`` is the (fractional) index along the third axis where the slice sits.
+    """
+    geometry = geometry or ImageGeometry()
+    pts = np.asarray(points, float)
+    ijk = np.column_stack([pts[:, 0], pts[:, 1], np.full(len(pts), float(slice_axis_index))])
+    poly = vtkPolyData()
+    poly.SetPoints(_points(geometry.to_world(ijk)))
+    poly.SetPolys(_cells(np.asarray(triangles).ravel(), 3))
+    _add_cell_array(poly, np.asarray(material, np.int32), "material")
+    _add_cell_array(poly, np.asarray(gray, np.float64), "gray")
+    _add_cell_array(poly, np.full(len(triangles), slice_index, np.int32), "slice")
+    poly.GetCellData().SetActiveScalars("material")
+    return poly
+
+
+def boundary_to_polydata(points, lines, sides, geometry=None, slice_axis_index=0.0):
+    """Boundary polylines (lists of vertex indices) -> vtkPolyData with lines.
+
+    Cell arrays ``material_a`` and ``material_b``: the materials on each side.
+    """
+    geometry = geometry or ImageGeometry()
+    pts = np.asarray(points, float)
+    ijk = np.column_stack([pts[:, 0], pts[:, 1], np.full(len(pts), float(slice_axis_index))])
+    poly = vtkPolyData()
+    poly.SetPoints(_points(geometry.to_world(ijk)))
+    ca = vtkCellArray()
+    if lines:
+        offsets = np.concatenate([[0], np.cumsum([len(l) for l in lines])]).astype(np.int64)
+        conn = np.concatenate(lines).astype(np.int64)
+        ca.SetData(numpy_support.numpy_to_vtkIdTypeArray(offsets, deep=True),
+                   numpy_support.numpy_to_vtkIdTypeArray(conn, deep=True))
+    poly.SetLines(ca)
+    sides = np.asarray(sides, np.int32).reshape(-1, 2)
+    _add_cell_array(poly, np.ascontiguousarray(sides[:, 0]), "material_a")
+    _add_cell_array(poly, np.ascontiguousarray(sides[:, 1]), "material_b")
+    return poly
+
+
+def polydata_to_arrays(poly):
+    """vtkPolyData of triangles -> (points (n, 3), triangles (m, 3), {cell array name: values})."""
+    pts = numpy_support.vtk_to_numpy(poly.GetPoints().GetData()) if poly.GetPoints() else np.zeros((0, 3))
+    polys = poly.GetPolys()
+    if polys.GetNumberOfCells():
+        conn = numpy_support.vtk_to_numpy(polys.GetConnectivityArray())
+        off = numpy_support.vtk_to_numpy(polys.GetOffsetsArray())
+        if not np.all(np.diff(off) == 3):
+            raise InputError("polydata: only triangle meshes are supported")
+        tri = conn.reshape(-1, 3).astype(np.int64)
+    else:
+        tri = np.zeros((0, 3), np.int64)
+    cd = poly.GetCellData()
+    arrays = {cd.GetArrayName(k): numpy_support.vtk_to_numpy(cd.GetArray(k))
+              for k in range(cd.GetNumberOfArrays())}
+    return np.array(pts), tri, arrays
