@@ -78,12 +78,17 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
        stays on a border line;
     3. else the rho-weighted centroid of the region (eq. 5).
 
-    Before the first iteration the site nearest each corner is moved onto it, so the four
-    corners are always sites and the Delaunay triangulation covers the image rectangle.
-    A region that lost all its pixels keeps its site (counted in ``empty_regions``).
-    A rule-2 move that would raise the region's energy (possible: eq. 6 is not the
-    constrained minimiser) is not taken for that iteration; this keeps F non-increasing,
-    which is what makes Lloyd's method converge.
+    Before the first iteration the site nearest each corner is moved onto it, and each
+    site whose starting region holds border pixels is moved onto that border line (eq. 6),
+    so the four corners are always sites, the border lines carry sites, and the Delaunay
+    triangulation covers the image rectangle. These classes are then kept: a border site
+    stays on its line, a free site stays free (its region may touch the border later; it
+    then follows rule 3). A border site moves to eq. (6) when that does not raise its
+    region's energy, else to the constrained minimiser (the centroid projected onto its
+    line): eq. (6) is not that minimiser, and taking it blindly can raise F. With fixed
+    classes and exact nearest-site regions, F never increases, which is what makes Lloyd's
+    method converge. A region that lost all its pixels keeps its site (counted in
+    ``empty_regions``).
 
     Parameters
     ----------
@@ -134,20 +139,51 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
     w = rho.ravel()
     wx, wy = w * px[:, 0], w * px[:, 1]
     sites, corner_sites = _pin_corners(sites, rho.shape)
-    is_corner_site = np.zeros(n, bool)
-    is_corner_site[corner_sites] = True
 
-    # Border pixels, one line at a time (corners excluded: rule 1 owns them).
-    border_lines = [
-        np.flatnonzero((yy.ravel() == 0) & (xx.ravel() > 0) & (xx.ravel() < cols - 1)),
-        np.flatnonzero((yy.ravel() == rows - 1) & (xx.ravel() > 0) & (xx.ravel() < cols - 1)),
-        np.flatnonzero((xx.ravel() == 0) & (yy.ravel() > 0) & (yy.ravel() < rows - 1)),
-        np.flatnonzero((xx.ravel() == cols - 1) & (yy.ravel() > 0) & (yy.ravel() < rows - 1)),
-    ]
+    # Border lines (corners excluded: rule 1 owns them): (pixel indices, axis held fixed, value)
+    xr, yr = xx.ravel(), yy.ravel()
+    inner_x = (xr > 0) & (xr < cols - 1)
+    inner_y = (yr > 0) & (yr < rows - 1)
+    lines = [(np.flatnonzero((yr == 0) & inner_x), 1, 0.0),
+             (np.flatnonzero((yr == rows - 1) & inner_x), 1, rows - 1.0),
+             (np.flatnonzero((xr == 0) & inner_y), 0, 0.0),
+             (np.flatnonzero((xr == cols - 1) & inner_y), 0, cols - 1.0)]
+
+    def border_barycentres(labels):
+        """Per site: the line carrying most of its region's border weight, and eq. (6) there."""
+        best_w = np.zeros(n)
+        best_line = np.full(n, -1)
+        bary = np.zeros((n, 2))
+        for k, (idx, axis, value) in enumerate(lines):
+            lab = labels[idx]
+            bw = np.bincount(lab, w[idx], n)
+            better = bw > best_w
+            if better.any():
+                bary[better, 0] = np.bincount(lab, wx[idx], n)[better] / bw[better]
+                bary[better, 1] = np.bincount(lab, wy[idx], n)[better] / bw[better]
+                bary[better, axis] = value  # exactly on the line, not value * w / w
+                best_w[better] = bw[better]
+                best_line[better] = k
+        return best_line, bary
 
     def energy_of(s, lab):
         d = px - s[lab]
         return float(np.sum(w * (d[:, 0] ** 2 + d[:, 1] ** 2)))
+
+    # Constraint of each site, decided once from the starting regions: -2 corner (rule 1),
+    # 0..3 on that border line (rule 2), -1 free (rule 3). Keeping the classes fixed is what
+    # makes the energy provably non-increasing; re-deciding them every iteration moves
+    # sites from the interior onto the border and raises F.
+    labels = nearest_site(px, sites)
+    constraint = np.full(n, -1)
+    line0, bary0 = border_barycentres(labels)
+    on = line0 >= 0
+    sites[on] = bary0[on]
+    constraint[on] = line0[on]
+    sites[corner_sites] = _pin_corners(sites, rho.shape)[0][corner_sites]
+    constraint[corner_sites] = -2
+    if len(np.unique(sites, axis=0)) != n:
+        raise InputError("sites: two starting sites coincide after snapping to the border")
 
     # Hamerly's bounds: u >= distance to the own site, l <= distance to any other site.
     # A pixel can change region only where u > l, so only those are re-queried; the
@@ -158,35 +194,32 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
     empty_total = 0
     converged = False
     it = 0
+    lo = np.array([0.0, 0.0])
+    hi = np.array([cols - 1.0, rows - 1.0])
     for it in range(1, max_iter + 1):
         W = np.bincount(labels, w, n)
         empty = W == 0
         empty_total += int(empty.sum())
         Wsafe = np.where(empty, 1.0, W)
         m = np.column_stack([np.bincount(labels, wx, n), np.bincount(labels, wy, n)]) / Wsafe[:, None]
-        new = np.where(empty[:, None], sites, m)
-        # rule 2: border barycentre on the heaviest border line of the region
-        best_w = np.zeros(n)
-        bary = np.zeros((n, 2))
-        for line in border_lines:
-            lab = labels[line]
-            bw = np.bincount(lab, w[line], n)
-            better = bw > best_w
-            if better.any():
-                bx = np.bincount(lab, wx[line], n)
-                by = np.bincount(lab, wy[line], n)
-                bary[better, 0] = bx[better] / bw[better]
-                bary[better, 1] = by[better] / bw[better]
-                best_w[better] = bw[better]
-        on_border = (best_w > 0) & ~is_corner_site
-        if on_border.any():
-            cand = bary[on_border]
-            cur = sites[on_border]
-            mm = m[on_border]
-            worse = np.sum((cand - mm) ** 2, axis=1) > np.sum((cur - mm) ** 2, axis=1)
-            cand[worse] = cur[worse]
-            new[on_border] = cand
-        new[is_corner_site] = sites[is_corner_site]  # rule 1: corners never move
+        new = np.where(empty[:, None], sites, m)  # rule 3 (an empty region keeps its site)
+        line_now, bary = border_barycentres(labels)
+        for k, (_, axis, value) in enumerate(lines):
+            sel = np.flatnonzero((constraint == k) & ~empty)
+            if len(sel) == 0:
+                continue
+            # constrained minimiser: the centroid projected onto the line (never raises F)
+            proj = m[sel].copy()
+            proj[:, axis] = value
+            proj[:, 1 - axis] = np.clip(proj[:, 1 - axis], lo[1 - axis] + 1e-6, hi[1 - axis] - 1e-6)
+            # eq. (6), the barycentre of the region's border pixels on this line, when it
+            # does not raise the region's energy W |x - m|^2 above the current site's
+            use6 = line_now[sel] == k
+            cur = np.sum((sites[sel] - m[sel]) ** 2, axis=1)
+            e6 = np.sum((bary[sel] - m[sel]) ** 2, axis=1)
+            use6 &= e6 <= cur
+            new[sel] = np.where(use6[:, None], bary[sel], proj)
+        new[constraint == -2] = sites[constraint == -2]  # rule 1: corners never move
         drift = np.hypot(*(new - sites).T)
         move = float(drift.max())
         sites = new

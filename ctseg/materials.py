@@ -135,17 +135,20 @@ def _union_find_roots(parent):
         root = nxt
 
 
-def merge_weak_boundaries(f, leaf, n_leaves, adjacency, step_threshold):
+def merge_weak_boundaries(f, leaf, n_leaves, adjacency, step_threshold, mergeable=None):
     """Merge adjacent leaves whose shared boundary shows no gray step.
 
     For each pair of adjacent leaves the step is the median |f(t_i) - f(t_j)| over the
     triangle pairs that straddle their boundary. Pairs are merged in order of increasing
     step while it is <= ``step_threshold`` (single linkage: a material split along a smooth
     gradient, such as beam-hardening cupping in steel, is rejoined; a real material boundary
-    is sharp in CT and keeps a step of a large part of the contrast). Returns new leaf ids.
+    is sharp in CT and keeps a step of a large part of the contrast). Leaves not in
+    ``mergeable`` (boolean per leaf) are left alone. Returns new leaf ids.
     """
     a, b = leaf[adjacency[:, 0]], leaf[adjacency[:, 1]]
     cross = a != b
+    if mergeable is not None:
+        cross &= mergeable[a] & mergeable[b]
     if not cross.any():
         return leaf
     lo = np.minimum(a[cross], b[cross])
@@ -174,44 +177,101 @@ def merge_weak_boundaries(f, leaf, n_leaves, adjacency, step_threshold):
     return new.reshape(-1)
 
 
-def _group_regions(f, area, region, adjacency, merge_k, merge_rel, merge_floor, min_leaf_area,
-                   merge_threshold=None):
-    """Group regions into materials by gray (see segment_triangles, rules 3-4)."""
+def interior_triangles(gray, adjacency, step_threshold):
+    """Triangles whose gray differs from every neighbour's by at most ``step_threshold``.
+
+    Those lie inside a material; triangles straddling a boundary (partial volume) have a
+    large step to a neighbour on at least one side.
+    """
+    f = np.asarray(gray, float)
+    step = np.zeros(len(f))
+    if len(adjacency):
+        d = np.abs(f[adjacency[:, 0]] - f[adjacency[:, 1]])
+        np.maximum.at(step, adjacency[:, 0], d)
+        np.maximum.at(step, adjacency[:, 1], d)
+    return step <= step_threshold
+
+
+def material_modes(gray, area, bandwidth, min_area, separation):
+    """Material gray levels: the modes of the area-weighted histogram of triangle grays.
+
+    The histogram (0.25 gray-level bins on 0-255) is smoothed with a Gaussian of
+    ``bandwidth``. Neighbouring modes are merged, weakest first, while the valley between
+    them is above half the lower peak (no real separation) or they are closer than
+    ``separation(level)`` gray levels; a mode whose basin holds less than ``min_area`` is
+    merged into the neighbour it is least separated from.
+
+    Returns
+    -------
+    means : (K,) ndarray
+        Area-weighted mean gray of each mode's basin, ascending.
+    edges : (K - 1,) ndarray
+        Gray levels of the valleys between consecutive modes.
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    f = np.asarray(gray, float)
+    w = np.asarray(area, float)
+    bin_w = 0.25
+    nb = int(255.0 / bin_w) + 1
+    idx = np.clip(np.round(f / bin_w).astype(int), 0, nb - 1)
+    hist = gaussian_filter1d(np.bincount(idx, w, nb), max(bandwidth, bin_w) / bin_w, mode="constant")
+    interior = (hist[1:-1] > hist[:-2]) & (hist[1:-1] >= hist[2:])
+    peaks = list(np.flatnonzero(interior) + 1)
+    if hist[0] > hist[1]:
+        peaks.insert(0, 0)
+    if hist[-1] > hist[-2]:
+        peaks.append(nb - 1)
+    if not peaks:
+        peaks = [int(np.argmax(hist))]
+    cum = np.concatenate([[0.0], np.cumsum(np.bincount(idx, w, nb))])
+
+    def valley(i):  # position of the minimum between peaks i and i+1
+        a, b = peaks[i], peaks[i + 1]
+        return a + int(np.argmin(hist[a:b + 1]))
+
+    while len(peaks) > 1:
+        vals = [valley(i) for i in range(len(peaks) - 1)]
+        bounds = [0] + [v + 1 for v in vals] + [nb]
+        mass = np.array([cum[bounds[k + 1]] - cum[bounds[k]] for k in range(len(peaks))])
+        ratio = np.array([hist[vals[i]] / max(min(hist[peaks[i]], hist[peaks[i + 1]]), 1e-300)
+                          for i in range(len(vals))])
+        gap = np.array([(peaks[i + 1] - peaks[i]) * bin_w / separation(peaks[i + 1] * bin_w)
+                        for i in range(len(vals))])
+        # weakness of each boundary: high valley or small gap means no real separation
+        weak = np.maximum(ratio / 0.5, 1.0 / np.maximum(gap, 1e-300))
+        small = np.flatnonzero(mass < min_area)
+        if weak.max() >= 1.0:
+            i = int(np.argmax(weak))
+        elif len(small):
+            k = int(small[np.argmin(mass[small])])
+            cand = [i for i in (k - 1, k) if 0 <= i < len(vals)]
+            i = max(cand, key=lambda j: weak[j])
+        else:
+            break
+        keep = peaks[i] if hist[peaks[i]] >= hist[peaks[i + 1]] else peaks[i + 1]
+        peaks[i:i + 2] = [keep]
+    vals = [valley(i) for i in range(len(peaks) - 1)]
+    edges = np.array([(v + 0.5) * bin_w for v in vals])
+    basin = np.searchsorted(edges, f)
+    means = np.array([np.average(f[basin == k], weights=w[basin == k]) if np.any(basin == k)
+                      else peaks[k] * bin_w for k in range(len(peaks))])
+    return means, edges
+
+
+def _group_regions(f, area, region, adjacency, solid, means, edges):
+    """Assign regions to materials (see segment_triangles, rules 3-4)."""
     n = int(region.max()) + 1
     ra = np.bincount(region, area, n)
     rg = np.bincount(region, area * f, n) / np.maximum(ra, 1e-300)
-    # Noise reference: spread of triangle grays inside the largest region (trimmed std).
-    big = region == int(np.argmax(ra))
-    lo, hi = weighted_percentile(f[big], area[big], [1.0, 99.0])
-    keep = big & (f >= lo) & (f <= hi)
-    sigma_ref = float(np.sqrt(np.cov(f[keep], aweights=area[keep]))) if keep.sum() > 1 else 0.0
-    base_tol = max(merge_floor, merge_k * sigma_ref)
     group = np.full(n, -1, np.int64)
-    g_area, g_sum = [], []
-    core = np.flatnonzero(ra >= min_leaf_area)
-    if len(core) == 0:
-        core = np.array([int(np.argmax(ra))])
-    for k in core[np.argsort(-ra[core], kind="stable")]:
-        if g_area:
-            means = np.array(g_sum) / np.array(g_area)
-            if merge_threshold is None:
-                tol = base_tol + merge_rel * np.maximum(np.abs(means), abs(rg[k]))
-            else:
-                tol = np.full(len(means), merge_threshold)
-            dist = np.abs(means - rg[k])
-            ok = np.flatnonzero(dist <= tol)
-            if len(ok):
-                j = int(ok[np.argmin(dist[ok] / tol[ok])])
-                group[k] = j
-                g_area[j] += ra[k]
-                g_sum[j] += ra[k] * rg[k]
-                continue
-        group[k] = len(g_area)
-        g_area.append(ra[k])
-        g_sum.append(ra[k] * rg[k])
-    gmean = np.array(g_sum) / np.array(g_area)
-    # Small regions: partial-volume mixes lie between the grays of the groups around them and
-    # join the closest of those; anything else (a pore, a speck) joins the closest group.
+    core = np.bincount(region, area * solid, n) > 0.5 * ra
+    if not core.any():
+        core[int(np.argmax(ra))] = True
+    group[core] = np.searchsorted(edges, rg[core])
+    # Other regions: partial-volume mixes lie between the grays of the materials around
+    # them and join the closest of those; anything else (a pore, a speck) joins the
+    # material closest in gray.
     a, b = region[adjacency[:, 0]], region[adjacency[:, 1]]
     cross = a != b
     a, b = a[cross], b[cross]
@@ -223,15 +283,15 @@ def _group_regions(f, area, region, adjacency, merge_k, merge_rel, merge_floor, 
             ng = np.unique(group[nb][group[nb] >= 0])
             if len(ng) == 0:
                 continue
-            means = gmean[ng]
-            if len(ng) >= 2 and means.min() <= rg[k] <= means.max():
-                group[k] = ng[int(np.argmin(np.abs(means - rg[k])))]
+            m = means[ng]
+            if len(ng) >= 2 and m.min() <= rg[k] <= m.max():
+                group[k] = ng[int(np.argmin(np.abs(m - rg[k])))]
             else:
-                group[k] = int(np.argmin(np.abs(gmean - rg[k])))
+                group[k] = int(np.argmin(np.abs(means - rg[k])))
             progressed = True
         pending = np.flatnonzero(group < 0)
         if not progressed:
-            group[pending] = [int(np.argmin(np.abs(gmean - rg[k]))) for k in pending]
+            group[pending] = [int(np.argmin(np.abs(means - rg[k]))) for k in pending]
             break
     return group[region]
 
@@ -391,9 +451,21 @@ def segment_triangles(gray, area, adjacency, centroids, split_threshold=None,
         leaf, n_leaves, calls, deepest = _recursive_split(
             f, area, adjacency, centroids, split_threshold, min_triangles, max_depth, cut_params,
             edge_length)
-        region = merge_weak_boundaries(f, leaf, n_leaves, adjacency, step_threshold)
-        group = _group_regions(f, area, region, adjacency, merge_k, merge_rel, merge_floor,
-                               min_leaf_area, merge_threshold)
+        interior = interior_triangles(f, adjacency, step_threshold)
+        leaf_area = np.bincount(leaf, area, n_leaves)
+        solid = np.bincount(leaf, area * interior, n_leaves) >= 0.5 * leaf_area
+        region = merge_weak_boundaries(f, leaf, n_leaves, adjacency, step_threshold, solid)
+        big = region == np.argmax(np.bincount(region, area))
+        ref = big & interior if np.any(big & interior) else big
+        sigma = weighted_spread(f[ref], area[ref]) if ref.sum() > 1 else 0.0
+        if merge_threshold is None:
+            base = max(merge_floor, merge_k * sigma)
+            separation = lambda level, base=base, rel=merge_rel: base + rel * level
+        else:
+            separation = lambda level, t=merge_threshold: max(t, 1e-9)
+        means, edges = material_modes(f[interior], area[interior], max(sigma, 0.5),
+                                      min_leaf_area, separation)
+        group = _group_regions(f, area, region, adjacency, solid[leaf], means, edges)
         material, mean = _order_by_gray(group, f, area)
         if n_materials is None or len(mean) >= n_materials:
             break

@@ -161,8 +161,10 @@ def default_ward_block_px(shape, n_sites):
     """Block size for Ward's pre-merge: about 16 blocks per final site, at least 1 pixel.
 
     Exact pixel-level Ward on a 512 x 512 image costs seconds in Python; pre-merging into
-    blocks keeps >= 16 blocks per site, which changes the final CVT energy by well under 1%
-    (measured by ``tests/test_sites.py::test_block_premerge_energy``).
+    blocks keeps >= 16 blocks per site. The final CVT energy then differs from exact Ward's
+    by -1.0% on average over 4 simulated 96 x 96 slices with 120 sites (single cases -3.4%
+    to +1.7%: Lloyd ends in a different local minimum either way);
+    ``tests/test_sites.py::test_block_premerge_energy`` checks it.
     """
     return max(1, int(np.sqrt(shape[0] * shape[1] / (16.0 * n_sites))))
 

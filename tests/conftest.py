@@ -1,0 +1,26 @@
+import numpy as np
+import pytest
+
+from ctseg.phantoms import make_phantom
+
+
+@pytest.fixture(scope="session")
+def phantom_cache():
+    cache = {}
+
+    def get(size, seed, materials):
+        key = (size, seed, tuple(materials))
+        if key not in cache:
+            cache[key] = make_phantom(size, seed=seed, materials=tuple(materials))
+        return cache[key]
+
+    return get
+
+
+def disc_image(size=48, noise=0.0, seed=0):
+    """Two materials: a bright disc on a dark background, with its truth."""
+    yy, xx = np.mgrid[0:size, 0:size]
+    truth = ((xx - size * 0.45) ** 2 + (yy - size * 0.55) ** 2 <= (size * 0.3) ** 2).astype(np.uint8)
+    rng = np.random.default_rng(seed)
+    img = 20.0 + 180.0 * truth + noise * rng.standard_normal(truth.shape)
+    return img, truth

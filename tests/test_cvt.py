@@ -1,0 +1,79 @@
+import numpy as np
+import pytest
+
+from ctseg import density_map, lloyd_cvt, ward_sites
+from ctseg.cvt import cvt_energy, nearest_site
+from ctseg.errors import InputError, ParameterError
+
+from conftest import disc_image
+
+
+def brute_nearest_dist(points, sites):
+    d = np.sqrt(((points[:, None, :] - sites[None, :, :]) ** 2).sum(-1))
+    return d.min(axis=1)
+
+
+def test_nearest_site_matches_brute_force():
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(0, 50, (2000, 2))
+    sites = rng.uniform(0, 50, (60, 2))
+    lab = nearest_site(pts, sites)
+    d = np.hypot(*(pts - sites[lab]).T)
+    np.testing.assert_allclose(d, brute_nearest_dist(pts, sites), atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def cvt_run():
+    img, _ = disc_image(60, noise=5.0)
+    rho = density_map(img)
+    return rho, lloyd_cvt(rho, ward_sites(rho, 80), max_iter=300)
+
+
+def test_final_regions_are_nearest_site(cvt_run):
+    rho, r = cvt_run
+    rows, cols = rho.shape
+    yy, xx = np.mgrid[0:rows, 0:cols]
+    px = np.column_stack([xx.ravel(), yy.ravel()]).astype(float)
+    d = np.hypot(*(px - r.sites[r.labels.ravel()]).T)
+    np.testing.assert_allclose(d, brute_nearest_dist(px, r.sites), atol=1e-9)
+
+
+def test_energy_never_increases(cvt_run):
+    rho, r = cvt_run
+    e = np.array(r.energy)
+    assert len(e) == r.n_iter + 1
+    assert np.all(np.diff(e) <= 1e-9 * e[0])
+    assert e[-1] < e[0]
+    assert np.isclose(e[-1], cvt_energy(rho, r.sites, r.labels))
+
+
+def test_corners_fixed_and_border_sites_on_border(cvt_run):
+    rho, r = cvt_run
+    rows, cols = rho.shape
+    for corner in [(0, 0), (cols - 1, 0), (0, rows - 1), (cols - 1, rows - 1)]:
+        assert np.any(np.all(r.sites == corner, axis=1))
+    # regions that hold border pixels keep their site on a border line (rule 2)
+    lab = r.labels
+    border_regions = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    s = r.sites[border_regions]
+    on_line = (s[:, 0] == 0) | (s[:, 0] == cols - 1) | (s[:, 1] == 0) | (s[:, 1] == rows - 1)
+    assert on_line.mean() > 0.9
+    # and no interior region's site sits on the border
+    inner = np.setdiff1d(np.arange(len(r.sites)), border_regions)
+    si = r.sites[inner]
+    assert np.all((si[:, 0] > 0) & (si[:, 0] < cols - 1) & (si[:, 1] > 0) & (si[:, 1] < rows - 1))
+
+
+def test_converges_and_reports(cvt_run):
+    _, r = cvt_run
+    assert r.converged and r.n_iter < 300
+
+
+def test_bad_inputs():
+    rho = np.ones((10, 10))
+    with pytest.raises(ParameterError):
+        lloyd_cvt(rho, np.array([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]]))
+    with pytest.raises(InputError):
+        lloyd_cvt(rho, np.array([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0], [20.0, 1.0]]))
+    with pytest.raises(ParameterError):
+        lloyd_cvt(rho, np.random.default_rng(0).uniform(0, 9, (6, 2)), tol=0)

@@ -1,0 +1,44 @@
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from ctseg import density_map
+from ctseg.errors import InputError, ParameterError
+
+
+def test_spec_formula_without_saturation():
+    rng = np.random.default_rng(1)
+    img = rng.normal(size=(30, 40)).cumsum(axis=1)
+    rho = density_map(img, sigma=1.5, floor=0.05, saturation=None)
+    # independent evaluation of SPEC 1 on the min-max normalised image
+    norm = (img - img.min()) / (img.max() - img.min())
+    gy, gx = np.gradient(ndimage.gaussian_filter(norm, 1.5, mode="nearest"))
+    mag = np.hypot(gx, gy)
+    np.testing.assert_allclose(rho, 0.05 + mag / mag.max(), rtol=1e-12, atol=1e-12)
+
+
+def test_range_and_edges_get_the_density():
+    img = np.zeros((40, 40))
+    img[:, 20:] = 100.0
+    img[10:15, 5:8] = 3.0  # a weak edge must still be dense in 'auto' mode
+    rho = density_map(img)
+    assert rho.min() >= 0.02 - 1e-12 and rho.max() <= 1.02 + 1e-12
+    assert rho[:, 19:21].min() > 0.9  # strong edge saturates
+    assert rho[12, 4:6].max() > 0.9  # weak edge too (auto saturation)
+    assert np.allclose(rho[30:, 30:36], 0.02)  # flat region falls to the floor
+
+
+def test_constant_image_is_floor():
+    assert np.all(density_map(np.full((5, 7), 3.0), floor=0.1) == 0.1)
+
+
+@pytest.mark.parametrize("bad", [np.zeros(5), np.zeros((2, 3, 4)), np.array([[np.nan, 1], [1, 1]])])
+def test_bad_images(bad):
+    with pytest.raises(InputError):
+        density_map(bad)
+
+
+@pytest.mark.parametrize("kw", [dict(sigma=-1), dict(floor=0), dict(saturation=2.0)])
+def test_bad_parameters(kw):
+    with pytest.raises(ParameterError):
+        density_map(np.eye(4), **kw)

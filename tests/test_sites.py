@@ -1,0 +1,106 @@
+import itertools
+
+import numpy as np
+import pytest
+
+from ctseg import density_random_sites, lloyd_cvt, random_sites, ward_sites
+from ctseg.errors import ParameterError
+from ctseg.sites import ward_agglomerate, ward_cost
+
+
+def naive_ward(weights, points, edges, n_clusters):
+    """O(n^3) reference: evaluate every adjacent cluster pair, merge the cheapest, repeat."""
+    clusters = [{i} for i in range(len(weights))]
+    adj = {frozenset(e) for e in map(tuple, edges)}
+
+    def stats(c):
+        idx = sorted(c)
+        w = weights[idx].sum()
+        return w, (weights[idx, None] * points[idx]).sum(axis=0) / w
+
+    def touching(a, b):
+        return any(frozenset((i, j)) in adj for i in a for j in b)
+
+    while len(clusters) > n_clusters:
+        best = None
+        for a, b in itertools.combinations(range(len(clusters)), 2):
+            if not touching(clusters[a], clusters[b]):
+                continue
+            wa, ma = stats(clusters[a])
+            wb, mb = stats(clusters[b])
+            cost = ward_cost(wa, ma, wb, mb)
+            if best is None or cost < best[0]:
+                best = (cost, a, b)
+        _, a, b = best
+        clusters[a] = clusters[a] | clusters[b]
+        del clusters[b]
+    return sorted(tuple(sorted(c)) for c in clusters)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_ward_matches_naive_reference(seed):
+    rng = np.random.default_rng(seed)
+    rows, cols = 6, 7
+    yy, xx = np.mgrid[0:rows, 0:cols]
+    pts = np.column_stack([xx.ravel(), yy.ravel()]).astype(float)
+    w = rng.uniform(0.1, 2.0, rows * cols)
+    ids = np.arange(rows * cols).reshape(rows, cols)
+    edges = np.concatenate([np.column_stack([ids[:, :-1].ravel(), ids[:, 1:].ravel()]),
+                            np.column_stack([ids[:-1].ravel(), ids[1:].ravel()])])
+    for k in (1, 5, 12):
+        labels, cw, cc = ward_agglomerate(w, pts, edges, k)
+        got = sorted(tuple(np.flatnonzero(labels == c)) for c in range(k))
+        assert got == naive_ward(w, pts, edges, k)
+        # centroids and weights are those of the clusters
+        for c in range(k):
+            m = labels == c
+            assert np.isclose(cw[c], w[m].sum())
+            np.testing.assert_allclose(cc[c], (w[m, None] * pts[m]).sum(0) / w[m].sum())
+
+
+def test_ward_sites_count_and_inside():
+    rho = np.random.default_rng(0).uniform(0.1, 1, (40, 50))
+    s = ward_sites(rho, 37)
+    assert s.shape == (37, 2)
+    assert s[:, 0].min() >= 0 and s[:, 0].max() <= 49 and s[:, 1].min() >= 0 and s[:, 1].max() <= 39
+    assert len(np.unique(s, axis=0)) == 37
+
+
+def test_block_premerge_energy():
+    """SPEC 2: the block pre-merge may not raise the final CVT energy by 1% or more.
+
+    Lloyd ends in a local minimum, so single cases differ either way by a few percent
+    (both signs seen); the criterion is on the mean over several phantoms, one-sided
+    (a lower energy is a better CVT).
+    """
+    from ctseg import density_map
+    from ctseg.phantoms import make_phantom
+
+    rel = []
+    for seed in range(4):
+        rho = density_map(make_phantom(96, seed=seed, supersample=2).image)
+        exact = lloyd_cvt(rho, ward_sites(rho, 120, block_px=1)).energy[-1]
+        fast = lloyd_cvt(rho, ward_sites(rho, 120)).energy[-1]
+        rel.append((fast - exact) / exact)
+    assert np.mean(rel) < 0.01 and max(rel) < 0.03
+
+
+def test_random_inits_deterministic_and_distinct():
+    rho = np.random.default_rng(0).uniform(0.1, 1, (20, 30))
+    for fn in (lambda s: random_sites(rho.shape, 50, seed=s), lambda s: density_random_sites(rho, 50, seed=s)):
+        a, b, c = fn(4), fn(4), fn(5)
+        assert np.array_equal(a, b) and not np.array_equal(a, c)
+        assert len(np.unique(a, axis=0)) == 50
+
+
+def test_density_random_prefers_dense_pixels():
+    rho = np.full((40, 40), 0.01)
+    rho[:, :10] = 1.0
+    s = density_random_sites(rho, 200, seed=0)
+    assert np.mean(s[:, 0] < 10) > 0.8
+
+
+@pytest.mark.parametrize("n", [3, 0, -5, 21])
+def test_bad_site_counts(n):
+    with pytest.raises(ParameterError):
+        ward_sites(np.ones((4, 5)), n)
