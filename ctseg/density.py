@@ -5,7 +5,7 @@ from scipy import ndimage
 from ._validate import as_image, check_number
 
 
-def density_map(image, sigma=1.0, floor=0.02, saturation="auto"):
+def density_map(image, sigma=1.0, floor=0.02, saturation="auto", ridge=0.0):
     """Per-pixel density rho from the smoothed gradient magnitude.
 
     ``rho = floor + min(1, g / g_ref)`` with ``g = |grad(G_sigma * I)|``. Large rho near
@@ -74,4 +74,9 @@ def density_map(image, sigma=1.0, floor=0.02, saturation="auto"):
         g_ref = max(10.0 * g_noise, 0.02 * peak)
     else:
         g_noise, g_ref = 0.0, saturation * peak
-    return floor + np.clip((mag - g_noise) / (g_ref - g_noise), 0.0, 1.0)
+    strength = np.clip((mag - g_noise) / (g_ref - g_noise), 0.0, 1.0)
+    if ridge:
+        size = 2 * int(np.ceil(2 * max(sigma, 0.5))) + 1
+        local = ndimage.maximum_filter(mag, size=size, mode="nearest")
+        strength = strength * (mag / np.maximum(local, 1e-300)) ** ridge
+    return floor + strength

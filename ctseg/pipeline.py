@@ -10,7 +10,7 @@ from .cvt import lloyd_cvt
 from .density import density_map
 from .errors import ParameterError
 from .intensity import estimate_noise, rescale_gray
-from .materials import segment_triangles
+from .materials import pixel_material_levels, segment_triangles
 from .sites import initial_sites
 from .triangle_gray import triangle_gray
 from .triangulation import delaunay_mesh, triangle_areas
@@ -73,12 +73,11 @@ class SegmentedMesh:
 
 
 def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, density_floor=0.02,
-                  density_saturation="auto",
-                  ward_block_px=None, tol_px=0.01, max_iter=200, split_threshold=None,
-                  step_threshold=None, merge_k=5.0, merge_rel=0.15, merge_floor=2.0,
-                  merge_threshold=None,
-                  n_materials=None, theta=None, lam=70.0, beta=0.286,
-                  min_triangles=4, max_depth=16, min_leaf_area=None,
+                  density_saturation="auto", density_ridge=0.0,
+                  ward_block_px=None, tol_px=0.01, max_iter=200, step_threshold=None,
+                  merge_k=5.0, merge_rel=0.2, merge_floor=2.0, merge_threshold=None,
+                  n_materials=None, theta=None, lam=70.0, beta=0.286, min_triangles=2,
+                  max_depth=32, min_material_area=None, min_pocket_area=4.0,
                   weight_by_edge_length=False, progress=None):
     """Segment a 2D gray image into a triangle mesh with one material per triangle.
 
@@ -101,9 +100,8 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         Ward pre-merge block size (1 = exact Ward).
     tol_px, max_iter
         Lloyd stopping rule.
-    split_threshold, step_threshold, merge_k, merge_rel, merge_floor, merge_threshold,
-    n_materials,
-    theta, lam, beta, min_triangles, max_depth, min_leaf_area
+    step_threshold, merge_k, merge_rel, merge_floor, merge_threshold, n_materials, theta,
+    lam, beta, min_triangles, max_depth, min_material_area, min_pocket_area
         Segmentation parameters on the 0-255 gray scale, see
         :func:`ctseg.materials.segment_triangles`.
     weight_by_edge_length : bool
@@ -150,7 +148,7 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
     g255, (offset, factor) = timed("rescale", 0.02, rescale_gray, img)
     noise = estimate_noise(g255)
     rho = timed("density", 0.05, density_map, img, sigma=sigma, floor=density_floor,
-                saturation=density_saturation)
+                saturation=density_saturation, ridge=density_ridge)
     sites0 = timed("initial_sites", 0.25, initial_sites, rho, n_sites, method=init, seed=seed,
                    block_px=ward_block_px)
     cvt = timed("cvt", 0.7, lloyd_cvt, rho, sites0, tol=tol_px, max_iter=max_iter)
@@ -163,11 +161,15 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
     if weight_by_edge_length:
         d = mesh.points[mesh.shared_edges[:, 0]] - mesh.points[mesh.shared_edges[:, 1]]
         edge_len = np.hypot(d[:, 0], d[:, 1])
+    flat = (rho - density_floor) < 0.5
+    levels, pixel_sigma = pixel_material_levels(g255, flat, merge_k=merge_k, merge_rel=merge_rel,
+                                                merge_floor=merge_floor, n_materials=n_materials)
     seg = timed("graphcut", 0.97, segment_triangles, f255, area, mesh.adjacency, cent,
-                split_threshold=split_threshold, step_threshold=step_threshold,
-                merge_k=merge_k, merge_rel=merge_rel, merge_floor=merge_floor,
-                merge_threshold=merge_threshold,
-                min_triangles=min_triangles, max_depth=max_depth, min_leaf_area=min_leaf_area,
+                levels=levels,
+                step_threshold=step_threshold, merge_k=merge_k, merge_rel=merge_rel,
+                merge_floor=merge_floor, merge_threshold=merge_threshold,
+                min_triangles=min_triangles, max_depth=max_depth,
+                min_material_area=min_material_area, min_pocket_area=min_pocket_area,
                 n_materials=n_materials, theta=theta, lam=lam, beta=beta,
                 edge_length=edge_len)
     bedges, bsides = timed("boundary", 1.0, material_boundary, mesh.shared_edges,
@@ -183,8 +185,9 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         "seed": int(seed),
         "pixel_noise_255": noise,
         "step_noise_255": seg.step_noise,
-        "split_threshold_255": seg.split_threshold,
         "step_threshold_255": seg.step_threshold,
+        "material_noise_255": seg.material_noise,
+        "material_levels_255": [float(v) for v in seg.mode_gray],
         "gray_rescale": {"offset": offset, "factor": factor},
         "times_s": times,
         "total_time_s": float(sum(times.values())),
