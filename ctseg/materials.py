@@ -469,7 +469,11 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
         edge_length = np.asarray(edge_length, float)
         if edge_length.shape != (len(adjacency),):
             raise ParameterError(f"edge_length: expected shape ({len(adjacency)},), got {edge_length.shape}")
-    cut_params = dict(theta=theta, lam=lam, beta=beta, eps=eps)
+    cut_params = dict(theta=theta, lam=check_number(lam, "lam", low=0.0),
+                      beta=check_number(beta, "beta", low=0.0),
+                      eps=check_number(eps, "eps", low=0.0, low_open=True))
+    if theta is not None:
+        check_number(theta, "theta", low=0.0)
 
     interior = interior_triangles(f, adjacency, step_threshold, 0.5 * merge_rel)
     if not interior.any():

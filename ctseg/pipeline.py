@@ -73,7 +73,7 @@ class SegmentedMesh:
 
 
 def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, density_floor=0.02,
-                  density_saturation="auto", density_ridge=0.0,
+                  density_saturation="auto", density_ridge=2.0,
                   ward_block_px=None, tol_px=0.01, max_iter=200, step_threshold=None,
                   merge_k=5.0, merge_rel=0.2, merge_floor=2.0, merge_threshold=None,
                   n_materials=None, theta=None, lam=70.0, beta=0.286, min_triangles=2,
@@ -93,9 +93,9 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
     seed : int
         Seed for the random initialisations (Ward's is deterministic anyway).
     init : {'ward', 'random', 'density_random'}
-    sigma, density_floor, density_saturation
-        Density map smoothing (px), floor and gradient normalisation (SPEC 1; see
-        :func:`ctseg.density_map`).
+    sigma, density_floor, density_saturation, density_ridge
+        Density map smoothing (px), floor, gradient normalisation and ridge sharpening
+        (SPEC 1; see :func:`ctseg.density_map`).
     ward_block_px : int, optional
         Ward pre-merge block size (1 = exact Ward).
     tol_px, max_iter
@@ -161,7 +161,10 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
     if weight_by_edge_length:
         d = mesh.points[mesh.shared_edges[:, 0]] - mesh.points[mesh.shared_edges[:, 1]]
         edge_len = np.hypot(d[:, 0], d[:, 1])
-    flat = (rho - density_floor) < 0.5
+    # pixels away from edges, judged without the ridge sharpening (it thins edge bands)
+    strength = rho if not density_ridge else density_map(
+        img, sigma=sigma, floor=density_floor, saturation=density_saturation)
+    flat = (strength - density_floor) < 0.5
     levels, pixel_sigma = pixel_material_levels(g255, flat, merge_k=merge_k, merge_rel=merge_rel,
                                                 merge_floor=merge_floor, n_materials=n_materials)
     seg = timed("graphcut", 0.97, segment_triangles, f255, area, mesh.adjacency, cent,

@@ -42,10 +42,56 @@ def _vtk_read(reader_cls, path, what):
     return reader
 
 
+def _check_png(path):
+    """Walk a PNG's chunks (CRC, IHDR, IDAT, IEND) and inflate its image data.
+
+    vtkPNGReader crashes the Python process (segmentation fault) on some corrupt or
+    truncated files, so nothing reaches it before this check passes.
+    """
+    import struct
+    import zlib
+
+    with open(path, "rb") as fh:
+        data = fh.read()
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        raise InputError(f"{path}: not a PNG file (bad signature)")
+    pos, idat, ihdr, seen_end = 8, [], None, False
+    while pos + 8 <= len(data):
+        (length,) = struct.unpack(">I", data[pos:pos + 4])
+        tag = data[pos + 4:pos + 8]
+        body = data[pos + 8:pos + 8 + length]
+        crc = data[pos + 8 + length:pos + 12 + length]
+        if len(body) != length or len(crc) != 4:
+            raise InputError(f"{path}: truncated PNG file (chunk {tag!r} cut short)")
+        if struct.unpack(">I", crc)[0] != zlib.crc32(tag + body) & 0xFFFFFFFF:
+            raise InputError(f"{path}: corrupt PNG file (bad checksum in chunk {tag!r})")
+        if tag == b"IHDR":
+            ihdr = struct.unpack(">IIBBBBB", body)
+        elif tag == b"IDAT":
+            idat.append(body)
+        elif tag == b"IEND":
+            seen_end = True
+            break
+        pos += 12 + length
+    if ihdr is None or not idat or not seen_end:
+        raise InputError(f"{path}: truncated or corrupt PNG file (missing IHDR, IDAT or IEND)")
+    try:
+        raw = zlib.decompress(b"".join(idat))
+    except zlib.error as exc:
+        raise InputError(f"{path}: corrupt PNG image data ({exc})") from None
+    width, height, depth, colour, _, _, interlace = ihdr
+    channels = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}.get(colour)
+    if channels is None or width == 0 or height == 0:
+        raise InputError(f"{path}: unsupported PNG header (colour type {colour})")
+    if not interlace and len(raw) != height * (1 + (width * channels * depth + 7) // 8):
+        raise InputError(f"{path}: corrupt PNG image data (wrong size)")
+
+
 def _read_png(path):
     from vtkmodules.vtkIOImage import vtkPNGReader
     from vtkmodules.util import numpy_support
 
+    _check_png(path)
     reader = _vtk_read(vtkPNGReader, path, "PNG")
     img = reader.GetOutput()
     scal = img.GetPointData().GetScalars()
@@ -67,18 +113,19 @@ def _read_tiff(path):
 
     reader = _vtk_read(vtkTIFFReader, path, "TIFF")
     arr, geom = image_to_array(reader.GetOutput())
-    return arr, geom
+    # vtkTIFFReader keeps the file's first row at j = 0; the PNG and DICOM readers put it at
+    # the largest j (y up, as the picture is seen). One convention for all: flip.
+    return np.ascontiguousarray(arr[..., ::-1, :]), geom
 
 
 def _read_dicom(path):
     from vtkmodules.vtkIOImage import vtkDICOMImageReader
 
+    # vtkDICOMImageReader applies rescale slope and intercept itself (checked by
+    # tests/test_io.py on a file with slope 2, intercept -1024) and puts the first stored
+    # row at the top (largest j), like VTK's other image readers.
     reader = _vtk_read(vtkDICOMImageReader, path, "DICOM")
-    arr, geom = image_to_array(reader.GetOutput())
-    slope = reader.GetRescaleSlope() or 1.0
-    intercept = reader.GetRescaleOffset()
-    arr = arr.astype(np.float64) * slope + intercept
-    return arr, geom
+    return image_to_array(reader.GetOutput())
 
 
 def read_image(path):

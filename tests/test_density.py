@@ -42,3 +42,13 @@ def test_bad_images(bad):
 def test_bad_parameters(kw):
     with pytest.raises(ParameterError):
         density_map(np.eye(4), **kw)
+
+
+def test_ridge_keeps_the_peak_on_the_edge_and_narrows_the_band():
+    img = np.zeros((30, 40))
+    img[:, 20:] = 100.0
+    flat_top = density_map(img, floor=0.02)
+    ridge = density_map(img, floor=0.02, ridge=2.0)
+    row = 15
+    assert np.argmax(ridge[row]) in (19, 20) and ridge[row].max() > 0.99
+    assert np.sum(ridge[row] > 0.5) < np.sum(flat_top[row] > 0.5)

@@ -1,0 +1,72 @@
+import numpy as np
+import pytest
+
+from ctseg import delaunay_mesh, density_map, lloyd_cvt, triangle_gray, ward_sites
+from ctseg.errors import ParameterError
+from ctseg.materials import material_modes, segment_triangles, weighted_percentile
+from ctseg.triangulation import triangle_areas
+
+
+def test_weighted_percentile_matches_repeated_samples():
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=50)
+    w = rng.integers(1, 5, 50)
+    rep = np.repeat(v, w)
+    for q in (1, 25, 50, 90, 99):
+        got = weighted_percentile(v, w, q)
+        ref = np.sort(rep)[int(np.ceil(q / 100 * len(rep))) - 1]
+        assert got == ref
+
+
+def test_material_modes_finds_separated_levels():
+    rng = np.random.default_rng(2)
+    v = np.concatenate([rng.normal(5, 1.5, 4000), rng.normal(25, 1.5, 400), rng.normal(60, 2, 3000),
+                        rng.normal(230, 8, 500)])
+    means, edges = material_modes(v, np.ones(len(v)), 1.5, 50, lambda g: 7.5 + 0.2 * g)
+    np.testing.assert_allclose(means, [5, 25, 60, 230], atol=1.5)
+    assert len(edges) == 3
+    # a level with too little mass is not a material
+    means2, _ = material_modes(v, np.ones(len(v)), 1.5, 450, lambda g: 7.5 + 0.2 * g)
+    assert len(means2) == 3
+
+
+def test_material_modes_does_not_chain_through_a_ramp():
+    # a continuous ramp between two levels (partial volume) must not fuse the two materials
+    rng = np.random.default_rng(3)
+    v = np.concatenate([rng.normal(10, 1, 5000), np.linspace(10, 100, 300), rng.normal(100, 1, 5000)])
+    means, _ = material_modes(v, np.ones(len(v)), 1.0, 50, lambda g: 5.0)
+    assert len(means) == 2
+
+
+def _mesh_of(img, n_sites):
+    rho = density_map(img)
+    m = delaunay_mesh(lloyd_cvt(rho, ward_sites(rho, n_sites)).sites)
+    g = triangle_gray(img, m.points, m.triangles)
+    return m, g, triangle_areas(m.points, m.triangles), m.points[m.triangles].mean(axis=1)
+
+
+def test_three_materials_numbered_by_gray():
+    yy, xx = np.mgrid[0:64, 0:64]
+    img = np.full((64, 64), 200.0)
+    img[(xx - 20) ** 2 + (yy - 30) ** 2 < 150] = 20.0
+    img[(xx - 45) ** 2 + (yy - 35) ** 2 < 120] = 110.0
+    img += np.random.default_rng(0).normal(0, 2, img.shape)
+    m, g, a, c = _mesh_of(img, 150)
+    res = segment_triangles(np.clip(g, 0, 255), a, m.adjacency, c)
+    assert len(res.material_gray) == 3
+    assert np.all(np.diff(res.material_gray) > 0)
+    # triangles well inside each disc get the right material
+    inside1 = ((c[:, 0] - 20) ** 2 + (c[:, 1] - 30) ** 2) < 60
+    inside2 = ((c[:, 0] - 45) ** 2 + (c[:, 1] - 35) ** 2) < 50
+    assert np.all(res.material[inside1] == 0) and np.all(res.material[inside2] == 1)
+    # n_materials=2 merges the two closest materials
+    res2 = segment_triangles(np.clip(g, 0, 255), a, m.adjacency, c, n_materials=2)
+    assert len(res2.material_gray) == 2
+    with pytest.raises(ParameterError):
+        segment_triangles(np.clip(g, 0, 255), a, m.adjacency, c, n_materials=40)
+
+
+def test_constant_gray_is_one_material():
+    m, g, a, c = _mesh_of(np.full((20, 20), 3.0) + np.eye(20) * 0, 12)
+    res = segment_triangles(np.zeros(len(g)), a, m.adjacency, c)
+    assert np.all(res.material == 0) and len(res.material_gray) == 1
