@@ -1,0 +1,40 @@
+"""512 x 512 acceptance runs on simulated slices (slow: run with `pytest -m slow`).
+
+The thresholds are the figures reached today minus a small margin, so a regression fails;
+the README's accuracy table states the measured values and the issue's targets.
+"""
+import os
+
+import numpy as np
+import pytest
+
+import ctseg
+from ctseg.metrics import evaluate
+
+pytestmark = pytest.mark.slow
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+@pytest.mark.parametrize("seed,materials,min_dice,max_bd", [
+    (0, ("air", "polymer", "aluminium", "steel"), 0.93, 1.0),
+    (1, ("air", "polymer", "aluminium", "steel"), 0.93, 1.0),
+    (2, ("air", "polymer", "aluminium", "steel"), 0.92, 1.3),
+    (3, ("air", "aluminium", "steel"), 0.98, 0.7),
+    (4, ("air", "polymer", "aluminium"), 0.98, 0.7),
+])
+def test_512_phantoms(phantom_cache, seed, materials, min_dice, max_bd):
+    p = phantom_cache(512, seed, materials)
+    seg = ctseg.segment_image(p.image)
+    ev = evaluate(seg, p.truth, p.truth_hr, p.supersample)
+    assert seg.n_materials == len(materials)
+    assert ev["min_dice"] >= min_dice, ev
+    assert ev["boundary_px"]["mean"] <= max_bd, ev
+
+
+def test_shipped_sample():
+    img = np.load(os.path.join(HERE, "..", "sample_data", "part_slice.npy"))
+    truth = np.load(os.path.join(HERE, "..", "sample_data", "part_slice_truth.npy"))
+    seg = ctseg.segment_image(img)
+    ev = evaluate(seg, truth)
+    assert seg.n_materials == 4
+    assert ev["min_dice"] >= 0.94 and ev["boundary_px"]["mean"] <= 1.1, ev
