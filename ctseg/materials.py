@@ -188,7 +188,7 @@ class MaterialSegmentation:
 
 
 def _recursive_split(f, area, adjacency, centroids, interior, edges, means, min_pocket,
-                     min_triangles, max_depth, cut_params, edge_length=None):
+                     min_layer_area, min_triangles, max_depth, cut_params, edge_length=None):
     """Split components while they hold more than one material; label each leaf.
 
     Returns (material per triangle, leaf per triangle, graph-cut calls, depth reached).
@@ -219,7 +219,8 @@ def _recursive_split(f, area, adjacency, centroids, interior, edges, means, min_
             leaf[comp] = len(leaf_material)
             if imass.max() >= min_pocket:
                 leaf_material.append(int(np.argmax(imass)))
-            elif len(present) == 1:  # its triangles sit in one material's core
+            elif len(present) == 1 and area[comp].sum() >= min_layer_area:
+                # a thin layer of one material: its triangles sit in that material's core
                 leaf_material.append(int(present[0]))
             else:  # -1: a partial-volume leaf, decided by its neighbours
                 leaf_material.append(-1)
@@ -388,9 +389,11 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
        48 of 49 leaves held 5 triangles or fewer, and polymer stayed inside the air leaf).
        Mixed boundary triangles go wherever the cut puts them; ``min_triangles`` and
        ``max_depth`` guard against endless splitting.
-    3. Each leaf becomes the material that holds most of its interior area, or else the
-       one material whose core holds its triangles (a thin wall has few interior
-       triangles). A leaf with neither is a partial-volume mix or a small pocket: if its
+    3. Each leaf becomes the material that holds most of its interior area, or else, if
+       it covers at least ``min_material_area``, the one material whose core holds its
+       triangles (a thin wall has few interior triangles). Any other leaf is a
+       partial-volume mix or a small pocket (a steel/polymer mix can have aluminium's
+       gray, so gray alone cannot tell): if its
        gray lies between the materials of the leaves around it, it joins the closest of
        those, else the material closest in gray. Two materials are
        joined where leaves of each, both holding >= ``min_material_area`` of interior
@@ -500,7 +503,7 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
                                       separation, n_modes=n_materials)
     material, leaf, calls, deepest = _recursive_split(
         f, area, adjacency, centroids, interior, edges, means, min_pocket_area,
-        min_triangles, max_depth, cut_params, edge_length)
+        min_material_area, min_triangles, max_depth, cut_params, edge_length)
     if n_materials is None:
         material = _join_modes_without_step(f, area, material, leaf, interior, adjacency,
                                             2.0 * step_threshold, min_material_area)
