@@ -3,6 +3,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from ._validate import check_number
 from .errors import ParameterError
@@ -238,8 +240,17 @@ def _recursive_split(f, area, adjacency, centroids, interior, edges, means, min_
         labels, _ = graphcut_split(f[comp], np.column_stack([a[keep], b[keep]]), centroids[comp],
                                    seeds=(in_comp[s0], in_comp[s1]), edge_length=el, **cut_params)
         calls += 1
-        stack.append((comp[labels == 1], depth + 1))
-        stack.append((comp[labels == 0], depth + 1))
+        # each side goes on as its connected pieces: a piece cut off far from the rest of
+        # its side (a partial-volume triangle whose gray matches that side) is judged alone
+        local = np.column_stack([a[keep], b[keep]])
+        same = labels[local[:, 0]] == labels[local[:, 1]]
+        n_loc = len(comp)
+        graph = coo_matrix((np.ones(same.sum()), (local[same, 0], local[same, 1])), shape=(n_loc, n_loc))
+        n_pieces, piece = connected_components(graph, directed=False)
+        order = np.argsort(piece, kind="stable")
+        bounds = np.searchsorted(piece[order], np.arange(n_pieces + 1))
+        for q in range(n_pieces - 1, -1, -1):
+            stack.append((comp[order[bounds[q]:bounds[q + 1]]], depth + 1))
     leaf_material = np.array(leaf_material, np.int64)
     _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means)
     return leaf_material[leaf], leaf, calls, deepest
@@ -257,12 +268,16 @@ def _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means)
     a, b = leaf[adjacency[:, 0]], leaf[adjacency[:, 1]]
     cross = a != b
     a, b = a[cross], b[cross]
-    pending = np.flatnonzero(leaf_material < 0)
+    solid = leaf_material >= 0  # labelled by interior triangles, not by this function
+    pending = np.flatnonzero(~solid)
     while len(pending):
         progressed = False
         for k in pending[np.argsort(-la[pending], kind="stable")]:
             nb = np.concatenate([b[a == k], a[b == k]])
-            ng = np.unique(leaf_material[nb][leaf_material[nb] >= 0])
+            # neighbours labelled by their own interior come first: a partial-volume leaf
+            # next to another one must not copy the gray-alike label it got
+            use = nb[solid[nb]] if solid[nb].any() else nb[leaf_material[nb] >= 0]
+            ng = np.unique(leaf_material[use])
             if len(ng) == 0:
                 continue
             lv = means[ng]
@@ -387,10 +402,12 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
        in a real scan those are single noisy or partial-volume triangles, and cutting
        between them shaves off a few triangles per call (measured on the simulated part:
        48 of 49 leaves held 5 triangles or fewer, and polymer stayed inside the air leaf).
-       Mixed boundary triangles go wherever the cut puts them; ``min_triangles`` and
-       ``max_depth`` guard against endless splitting.
+       Each side of a cut recurses as its connected pieces (the seed sets of eq. 8 can
+       pull a far-away partial-volume triangle to a side by gray alone). Mixed boundary
+       triangles go wherever the cut puts them; ``min_triangles`` and ``max_depth`` guard
+       against endless splitting.
     3. Each leaf becomes the material that holds most of its interior area, or else, if
-       it covers at least ``min_material_area``, the one material whose core holds its
+       it covers at least 4 x ``min_material_area``, the one material whose core holds its
        triangles (a thin wall has few interior triangles). Any other leaf is a
        partial-volume mix or a small pocket (a steel/polymer mix can have aluminium's
        gray, so gray alone cannot tell): if its
@@ -503,7 +520,7 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
                                       separation, n_modes=n_materials)
     material, leaf, calls, deepest = _recursive_split(
         f, area, adjacency, centroids, interior, edges, means, min_pocket_area,
-        min_material_area, min_triangles, max_depth, cut_params, edge_length)
+        4.0 * min_material_area, min_triangles, max_depth, cut_params, edge_length)
     if n_materials is None:
         material = _join_modes_without_step(f, area, material, leaf, interior, adjacency,
                                             2.0 * step_threshold, min_material_area)
