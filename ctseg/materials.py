@@ -174,7 +174,8 @@ class MaterialSegmentation:
         Noise of steps between adjacent triangles, and the step above which a triangle
         counts as straddling a boundary (0-255 scale).
     material_noise : float
-        Spread of interior triangle grays in the dominant material (0-255 scale).
+        Spread of interior triangle grays in the dominant material (0-255 scale; 0 when
+        the levels were given).
     """
 
     material: np.ndarray
@@ -292,6 +293,14 @@ def _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means)
             break
 
 
+def dominant_spread(values, weights):
+    """Noise of a whole material: the spread of the values in the heaviest coarse mode."""
+    coarse, cedges = material_modes(values, weights, 2.0, 0.0, lambda g: 8.0)
+    basin = np.searchsorted(cedges, values)
+    dom = basin == np.argmax(np.bincount(basin, weights, len(coarse)))
+    return weighted_spread(values[dom], weights[dom]) if dom.sum() > 1 else 0.0
+
+
 def pixel_material_levels(image255, flat, merge_k=5.0, merge_rel=0.2, merge_floor=2.0,
                           min_fraction=1e-3, n_materials=None):
     """Material gray levels from the pixels away from edges (SPEC 7's data-driven defaults).
@@ -321,10 +330,7 @@ def pixel_material_levels(image255, flat, merge_k=5.0, merge_rel=0.2, merge_floo
     flat = np.asarray(flat, bool)
     v = img[flat] if flat.sum() >= 16 else img.ravel()
     w = np.ones(len(v))
-    coarse, cedges = material_modes(v, w, 2.0, 0.0, lambda g: 8.0)
-    basin = np.searchsorted(cedges, v)
-    dom = basin == np.argmax(np.bincount(basin, minlength=len(coarse)))
-    sigma = weighted_spread(v[dom], w[dom])
+    sigma = dominant_spread(v, w)
     base = max(merge_floor, merge_k * sigma)
     levels, _ = material_modes(v, w, max(sigma, 0.5), 0.0 if n_materials else min_fraction * len(v),
                                lambda g: base + merge_rel * g, n_modes=n_materials)
@@ -498,23 +504,19 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
     interior = interior_triangles(f, adjacency, step_threshold, 0.5 * merge_rel)
     if not interior.any():
         interior = np.ones(len(f), bool)
-    # noise of whole-material gray: interior triangles of the dominant mode
-    ref = interior
-    coarse_means, coarse_edges = material_modes(f[ref], area[ref], 2.0, 0.0, lambda g: 8.0)
-    basin = np.searchsorted(coarse_edges, f)
-    dom = ref & (basin == np.argmax(np.bincount(basin[ref], area[ref], len(coarse_means))))
-    sigma = weighted_spread(f[dom], area[dom]) if dom.sum() > 1 else 0.0
-    if merge_threshold is None:
-        base = max(merge_floor, merge_k * sigma)
-        separation = lambda level: base + merge_rel * level
-    else:
-        separation = lambda level: merge_threshold
+    sigma = 0.0
     if levels is not None:
         means = np.sort(np.asarray(levels, float).ravel())
         if n_materials is not None and len(means) != n_materials:
             raise ParameterError(f"levels: {len(means)} levels given for n_materials={n_materials}")
         edges = 0.5 * (means[1:] + means[:-1])
     else:
+        sigma = dominant_spread(f[interior], area[interior])
+        if merge_threshold is None:
+            base = max(merge_floor, merge_k * sigma)
+            separation = lambda level: base + merge_rel * level
+        else:
+            separation = lambda level: merge_threshold
         means, edges = material_modes(f[interior], area[interior], max(sigma, 0.5),
                                       min_material_area if n_materials is None else 0.0,
                                       separation, n_modes=n_materials)

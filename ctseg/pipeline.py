@@ -189,7 +189,7 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         "pixel_noise_255": noise,
         "step_noise_255": seg.step_noise,
         "step_threshold_255": seg.step_threshold,
-        "material_noise_255": seg.material_noise,
+        "material_noise_255": pixel_sigma,
         "material_levels_255": [float(v) for v in seg.mode_gray],
         "gray_rescale": {"offset": offset, "factor": factor},
         "times_s": times,
