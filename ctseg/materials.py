@@ -337,48 +337,6 @@ def pixel_material_levels(image255, flat, merge_k=5.0, merge_rel=0.2, merge_floo
     return levels, sigma
 
 
-def _join_modes_without_step(f, area, material, leaf, interior, adjacency, step_threshold,
-                             min_area):
-    """Join two materials where solid leaves of each meet without a gray step.
-
-    In CT a boundary between materials is a sharp step; a smooth passage from one gray
-    level to another between two large leaves is one material with a gradient across it
-    (a beam-hardening streak or cupping) that produced an extra histogram mode.
-    """
-    n_leaves = int(leaf.max()) + 1
-    solid = np.bincount(leaf, area * interior, n_leaves) >= min_area
-    a, b = leaf[adjacency[:, 0]], leaf[adjacency[:, 1]]
-    ma, mb = material[adjacency[:, 0]], material[adjacency[:, 1]]
-    cross = (a != b) & (ma != mb) & solid[a] & solid[b]
-    if not cross.any():
-        return material
-    lo, hi = np.minimum(a[cross], b[cross]), np.maximum(a[cross], b[cross])
-    d = np.abs(f[adjacency[cross, 0]] - f[adjacency[cross, 1]])
-    key = lo * n_leaves + hi
-    order = np.argsort(key, kind="stable")
-    key, d = key[order], d[order]
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    ends = np.r_[starts[1:], len(key)]
-    n_mat = int(material.max()) + 1
-    parent = np.arange(n_mat)
-    leaf_mat = np.zeros(n_leaves, np.int64)
-    leaf_mat[leaf] = material
-    for s_, e_ in zip(starts, ends):
-        if e_ - s_ >= 3 and np.median(d[s_:e_]) <= step_threshold:
-            x, y = leaf_mat[key[s_] // n_leaves], leaf_mat[key[s_] % n_leaves]
-            while parent[x] != x:
-                x = parent[x]
-            while parent[y] != y:
-                y = parent[y]
-            parent[max(x, y)] = min(x, y)
-    for k in range(n_mat):
-        r = k
-        while parent[r] != r:
-            r = parent[r]
-        parent[k] = r
-    return parent[material]
-
-
 def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, merge_k=5.0,
                       merge_rel=0.2, merge_floor=2.0, merge_threshold=None, min_triangles=2,
                       max_depth=32, min_material_area=None, min_pocket_area=4.0,
@@ -418,13 +376,9 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
        partial-volume mix or a small pocket (a steel/polymer mix can have aluminium's
        gray, so gray alone cannot tell): if its
        gray lies between the materials of the leaves around it, it joins the closest of
-       those, else the material closest in gray. Two materials are
-       joined where leaves of each, both holding >= ``min_material_area`` of interior
-       area, meet along at least 3 edges with a median step <= 2 * ``step_threshold``: a
-       streak or cupping gradient, not a boundary (:func:`_join_modes_without_step`).
-       Materials are
-       numbered 0..K-1 by ascending gray; ``n_materials=K`` merges the least separated
-       modes until K remain (ParameterError if the data show fewer than K).
+       those, else the material closest in gray.
+    4. Materials are numbered 0..K-1 by ascending gray; ``n_materials=K`` merges the least
+       separated modes until K remain (ParameterError if the data show fewer than K).
 
     Parameters
     ----------
@@ -523,9 +477,6 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
     material, leaf, calls, deepest = _recursive_split(
         f, area, adjacency, centroids, interior, edges, means, min_pocket_area,
         4.0 * min_material_area, min_triangles, max_depth, cut_params, edge_length)
-    if n_materials is None:
-        material = _join_modes_without_step(f, area, material, leaf, interior, adjacency,
-                                            2.0 * step_threshold, min_material_area)
     used, material = np.unique(material, return_inverse=True)
     k = len(used)
     mat_gray = np.bincount(material, area * f, k) / np.bincount(material, area, k)
