@@ -38,7 +38,7 @@ class CVTResult:
 
 def nearest_site(points, sites):
     """Index of the nearest site for each point (Euclidean; ties go to the lower index)."""
-    return cKDTree(sites).query(points, k=1)[1]
+    return cKDTree(sites).query(points, k=1, workers=-1)[1]
 
 
 def cvt_energy(rho, sites, labels):
@@ -188,7 +188,7 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
     # Hamerly's bounds: u >= distance to the own site, l <= distance to any other site.
     # A pixel can change region only where u > l, so only those are re-queried; the
     # assignment stays exactly the nearest site (the energy argument needs that).
-    d, idx = cKDTree(sites).query(px, k=2)
+    d, idx = cKDTree(sites).query(px, k=2, workers=-1)
     labels, u, l = idx[:, 0], d[:, 0], d[:, 1]
     energy = [energy_of(sites, labels)]
     empty_total = 0
@@ -231,7 +231,7 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
             u[check] = np.hypot(px[check, 0] - own[:, 0], px[check, 1] - own[:, 1])
             check = check[u[check] > l[check]]
         if len(check):
-            d, idx = cKDTree(sites).query(px[check], k=2)
+            d, idx = cKDTree(sites).query(px[check], k=2, workers=-1)
             labels[check], u[check], l[check] = idx[:, 0], d[:, 0], d[:, 1]
         energy.append(energy_of(sites, labels))
         if move < tol:
