@@ -118,7 +118,7 @@ def material_modes(gray, area, bandwidth, min_area, separation, n_modes=None):
 
     if n_modes is not None and len(peaks) < n_modes:
         raise ParameterError(
-            f"n_materials: asked for {n_modes} materials but the triangle grays show only "
+            f"n_materials: asked for {n_modes} materials but the gray values show only "
             f"{len(peaks)} distinct levels")
     while len(peaks) > 1:
         vals = [valley(i) for i in range(len(peaks) - 1)]

@@ -131,3 +131,33 @@ def test_label_image_matches_point_location():
     mat = np.array([seg.material[ours[tuple(sorted(tri.simplices[s]))]] for s in simplex])
     agree = np.mean(mat == lab[1:rows - 1, 1:cols - 1].ravel())
     assert agree > 0.97  # majority-area vs centre-point rule differ only on cut pixels
+
+
+@pytest.mark.parametrize("dtype", [bool, np.int8, np.uint8, np.int16, np.uint16, np.int32,
+                                   np.uint32, np.int64, np.uint64, np.float16, np.float32])
+def test_every_dtype_gives_a_valid_mesh(dtype):
+    from ctseg.meshcheck import mesh_check_report
+
+    img, truth = disc_image(32, noise=0.0)
+    arr = truth.astype(dtype) if dtype is bool else (img / 2).astype(dtype)
+    seg = ctseg.segment_image(arr, n_sites=40)
+    assert seg.n_materials == 2
+    assert mesh_check_report(seg.points, seg.triangles)["ok"]
+
+
+@pytest.mark.parametrize("scale", [1e-12, 1e30, 1e300])
+def test_extreme_value_ranges(scale):
+    img, _ = disc_image(32, noise=2.0)
+    seg = ctseg.segment_image(img * scale, n_sites=40)
+    assert seg.n_materials == 2 and np.all(np.isfinite(seg.gray))
+
+
+def test_tiny_images():
+    seg = ctseg.segment_image(np.array([[0.0, 1.0], [2.0, 3.0]]))
+    assert len(seg.triangles) == 2 and len(seg.points) == 4
+
+
+def test_too_many_materials_is_a_parameter_error():
+    img, _ = disc_image(32, noise=2.0)
+    with pytest.raises(ParameterError, match="n_materials"):
+        ctseg.segment_image(img, n_sites=40, n_materials=5)
