@@ -47,6 +47,10 @@ class CTSegAlgorithm(VTKPythonAlgorithmBase):
         vtkOutputWindow.GetInstance().DisplayErrorText(
             f"{type(self).__name__}: {message}\n")
 
+    def GetOutput(self, port=0):
+        """The output data object, as VTK's own algorithms offer it."""
+        return self.GetOutputDataObject(port)
+
     def apply(self, data):
         """Run the filter on a data object in plain Python and return the output.
 

@@ -46,6 +46,7 @@ def test_segment_filter_in_a_vtk_pipeline(tmp_path):
                                      * [0.2, 0.3, 1.0]) @ rot.T
     np.testing.assert_allclose(pts, world, atol=1e-9)
     assert progress and max(progress) == 1.0
+    assert seg_filter.GetOutput().GetNumberOfCells() == len(tri)
 
 
 def test_parameters_mark_modified():
