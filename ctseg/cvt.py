@@ -41,13 +41,22 @@ def nearest_site(points, sites):
     return cKDTree(sites).query(points, k=1, workers=-1)[1]
 
 
+def pixel_centres(shape):
+    """(rows * cols, 2) pixel centres (x, y) in row-major order."""
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
+    return np.column_stack([xx.ravel(), yy.ravel()]).astype(np.float64)
+
+
+def _energy(px, w, sites, labels):
+    d = px - sites[labels]
+    return float(np.sum(w * (d[:, 0] ** 2 + d[:, 1] ** 2)))
+
+
 def cvt_energy(rho, sites, labels):
     """CVT energy F = sum_j rho_j ||c_j - x_{label(j)}||^2 over pixels j (paper eq. 4)."""
-    rows, cols = rho.shape
-    yy, xx = np.mgrid[0:rows, 0:cols]
-    s = sites[labels.ravel()]
-    d2 = (xx.ravel() - s[:, 0]) ** 2 + (yy.ravel() - s[:, 1]) ** 2
-    return float(np.sum(rho.ravel() * d2))
+    rho = np.asarray(rho, float)
+    return _energy(pixel_centres(rho.shape), rho.ravel(), np.asarray(sites, float),
+                   np.asarray(labels).ravel())
 
 
 def _pin_corners(sites, shape):
@@ -134,14 +143,13 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
             or sites[:, 1].min() < 0 or sites[:, 1].max() > rows - 1):
         raise InputError("sites: every site must lie inside the image (0..cols-1, 0..rows-1)")
 
-    yy, xx = np.mgrid[0:rows, 0:cols]
-    px = np.column_stack([xx.ravel(), yy.ravel()]).astype(np.float64)
+    px = pixel_centres(rho.shape)
+    xr, yr = px[:, 0], px[:, 1]
     w = rho.ravel()
     wx, wy = w * px[:, 0], w * px[:, 1]
     sites, corner_sites = _pin_corners(sites, rho.shape)
 
     # Border lines (corners excluded: rule 1 owns them): (pixel indices, axis held fixed, value)
-    xr, yr = xx.ravel(), yy.ravel()
     inner_x = (xr > 0) & (xr < cols - 1)
     inner_y = (yr > 0) & (yr < rows - 1)
     lines = [(np.flatnonzero((yr == 0) & inner_x), 1, 0.0),
@@ -166,10 +174,6 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
                 best_line[better] = k
         return best_line, bary
 
-    def energy_of(s, lab):
-        d = px - s[lab]
-        return float(np.sum(w * (d[:, 0] ** 2 + d[:, 1] ** 2)))
-
     # Constraint of each site, decided once from the starting regions: -2 corner (rule 1),
     # 0..3 on that border line (rule 2), -1 free (rule 3). Keeping the classes fixed is what
     # makes the energy provably non-increasing; re-deciding them every iteration moves
@@ -190,7 +194,7 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
     # assignment stays exactly the nearest site (the energy argument needs that).
     d, idx = cKDTree(sites).query(px, k=2, workers=-1)
     labels, u, l = idx[:, 0], d[:, 0], d[:, 1]
-    energy = [energy_of(sites, labels)]
+    energy = [_energy(px, w, sites, labels)]
     empty_total = 0
     converged = False
     it = 0
@@ -233,7 +237,7 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
         if len(check):
             d, idx = cKDTree(sites).query(px[check], k=2, workers=-1)
             labels[check], u[check], l[check] = idx[:, 0], d[:, 0], d[:, 1]
-        energy.append(energy_of(sites, labels))
+        energy.append(_energy(px, w, sites, labels))
         if move < tol:
             converged = True
             break

@@ -1,5 +1,5 @@
 """Stage 7: recursive graph-cut segmentation of the triangles into materials (paper 6, 8; SPEC 7)."""
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
@@ -187,7 +187,6 @@ class MaterialSegmentation:
     step_noise: float = 0.0
     step_threshold: float = 0.0
     material_noise: float = 0.0
-    notes: list = field(default_factory=list)
 
 
 def _recursive_split(f, area, adjacency, centroids, interior, edges, means, min_pocket,

@@ -201,7 +201,6 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         "graphcut_calls": int(seg.graphcut_calls),
         "recursion_depth": int(seg.max_depth_reached),
         "material_gray": [float(v) for v in mat_gray],
-        "notes": list(seg.notes),
     }
     return SegmentedMesh(points=mesh.points, triangles=mesh.triangles, material=seg.material,
                          gray=gray, boundary_edges=bedges, boundary_sides=bsides,
