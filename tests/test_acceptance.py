@@ -16,11 +16,11 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 
 @pytest.mark.parametrize("seed,materials,min_dice,max_bd", [
-    (0, ("air", "polymer", "aluminium", "steel"), 0.95, 0.9),
-    (1, ("air", "polymer", "aluminium", "steel"), 0.95, 0.9),
-    (2, ("air", "polymer", "aluminium", "steel"), 0.95, 1.2),
-    (3, ("air", "aluminium", "steel"), 0.98, 0.7),
-    (4, ("air", "polymer", "aluminium"), 0.98, 1.0),
+    (0, ("air", "polymer", "aluminium", "steel"), 0.96, 0.7),
+    (1, ("air", "polymer", "aluminium", "steel"), 0.945, 0.7),
+    (2, ("air", "polymer", "aluminium", "steel"), 0.945, 1.0),
+    (3, ("air", "aluminium", "steel"), 0.985, 0.7),
+    (4, ("air", "polymer", "aluminium"), 0.985, 0.7),
 ])
 def test_512_phantoms(phantom_cache, seed, materials, min_dice, max_bd):
     p = phantom_cache(512, seed, materials)
@@ -37,4 +37,4 @@ def test_shipped_sample():
     seg = ctseg.segment_image(img)
     ev = evaluate(seg, truth)
     assert seg.n_materials == 4
-    assert ev["min_dice"] >= 0.96 and ev["boundary_px"]["mean"] <= 1.0, ev
+    assert ev["min_dice"] >= 0.955 and ev["boundary_px"]["mean"] <= 0.8, ev
