@@ -267,13 +267,17 @@ def _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means)
     lg = np.bincount(leaf, area * f, n) / np.maximum(la, 1e-300)
     a, b = leaf[adjacency[:, 0]], leaf[adjacency[:, 1]]
     cross = a != b
-    a, b = a[cross], b[cross]
+    src = np.concatenate([a[cross], b[cross]])
+    dst = np.concatenate([b[cross], a[cross]])
+    order = np.argsort(src, kind="stable")
+    src, dst = src[order], dst[order]
+    start = np.searchsorted(src, np.arange(n + 1))
     solid = leaf_material >= 0  # labelled by interior triangles, not by this function
     pending = np.flatnonzero(~solid)
     while len(pending):
         progressed = False
         for k in pending[np.argsort(-la[pending], kind="stable")]:
-            nb = np.concatenate([b[a == k], a[b == k]])
+            nb = dst[start[k]:start[k + 1]]
             # neighbours labelled by their own interior come first: a partial-volume leaf
             # next to another one must not copy the gray-alike label it got
             use = nb[solid[nb]] if solid[nb].any() else nb[leaf_material[nb] >= 0]
@@ -340,12 +344,17 @@ def _partial_volume_triangles(f, material, interior, adjacency, means):
     """A boundary triangle whose gray lies between the levels of two materials it touches
     takes the closer of the two (the material covering most of it)."""
     mat = material.copy()
-    i, j = adjacency[:, 0], adjacency[:, 1]
+    m = len(f)
+    # neighbour lists in CSR form (each triangle has at most 3 neighbours)
+    src = np.concatenate([adjacency[:, 0], adjacency[:, 1]])
+    dst = np.concatenate([adjacency[:, 1], adjacency[:, 0]])
+    order = np.argsort(src, kind="stable")
+    src, dst = src[order], dst[order]
+    start = np.searchsorted(src, np.arange(m + 1))
     for _ in range(2):
         changed = False
         for t in np.flatnonzero(~interior):
-            nb = np.concatenate([j[i == t], i[j == t]])
-            cand = np.unique(np.concatenate([mat[nb], [mat[t]]]))
+            cand = np.unique(np.append(mat[dst[start[t]:start[t + 1]]], mat[t]))
             if len(cand) < 2:
                 continue
             lv = means[cand]
