@@ -74,7 +74,7 @@ def _pin_corners(sites, shape):
     return sites, np.array(taken)
 
 
-def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
+def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
     """Lloyd iterations of the pixel CVT with the paper's corner and border rules.
 
     Each pixel belongs to the region of its nearest site (pixel centres, Euclidean). Then
@@ -109,6 +109,8 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
         Stop when the largest site displacement is below this, in pixels.
     max_iter : int, optional
         Iteration cap.
+    progress : callable, optional
+        Called as ``progress(iteration, max_iter)`` after every iteration.
 
     Returns
     -------
@@ -238,6 +240,8 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200):
             d, idx = cKDTree(sites).query(px[check], k=2, workers=-1)
             labels[check], u[check], l[check] = idx[:, 0], d[:, 0], d[:, 1]
         energy.append(_energy(px, w, sites, labels))
+        if progress is not None:
+            progress(it, max_iter)
         if move < tol:
             converged = True
             break

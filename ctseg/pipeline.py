@@ -107,7 +107,8 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
     weight_by_edge_length : bool
         Multiply n-links by the shared edge length (an option, not the paper's).
     progress : callable, optional
-        Called as ``progress(fraction, stage_name)`` after each stage.
+        Called as ``progress(fraction_done, stage_name)`` when each stage starts, after
+        every Lloyd iteration, and with ``(1.0, "done")`` at the end.
 
     Returns
     -------
@@ -139,21 +140,22 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
     report = progress or (lambda frac, stage: None)
 
     def timed(name, frac, fn, *a, **k):
+        report(frac, name)  # the stage that starts now, and the share of the work done
         t0 = time.perf_counter()
         out = fn(*a, **k)
         times[name] = time.perf_counter() - t0
-        report(frac, name)
         return out
 
-    g255, (offset, factor) = timed("rescale", 0.02, rescale_gray, img)
+    g255, (offset, factor) = timed("rescale", 0.0, rescale_gray, img)
     noise = estimate_noise(g255)
-    rho = timed("density", 0.05, density_map, img, sigma=sigma, floor=density_floor,
+    rho = timed("density", 0.01, density_map, img, sigma=sigma, floor=density_floor,
                 saturation=density_saturation, ridge=density_ridge)
-    sites0 = timed("initial_sites", 0.25, initial_sites, rho, n_sites, method=init, seed=seed,
+    sites0 = timed("initial_sites", 0.03, initial_sites, rho, n_sites, method=init, seed=seed,
                    block_px=ward_block_px)
-    cvt = timed("cvt", 0.7, lloyd_cvt, rho, sites0, tol=tol_px, max_iter=max_iter)
-    mesh = timed("triangulation", 0.75, delaunay_mesh, cvt.sites)
-    gray = timed("triangle_gray", 0.85, triangle_gray, img, mesh.points, mesh.triangles)
+    cvt = timed("cvt", 0.2, lloyd_cvt, rho, sites0, tol=tol_px, max_iter=max_iter,
+                progress=lambda it, n: report(0.2 + 0.5 * it / max(n, 1), "cvt"))
+    mesh = timed("triangulation", 0.7, delaunay_mesh, cvt.sites)
+    gray = timed("triangle_gray", 0.71, triangle_gray, img, mesh.points, mesh.triangles)
     f255 = np.clip((gray - offset) * factor, 0.0, 255.0)
     area = triangle_areas(mesh.points, mesh.triangles)
     cent = mesh.points[mesh.triangles].mean(axis=1)
@@ -167,7 +169,7 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
     flat = (strength - density_floor) < 0.5
     levels, pixel_sigma = pixel_material_levels(g255, flat, merge_k=merge_k, merge_rel=merge_rel,
                                                 merge_floor=merge_floor, n_materials=n_materials)
-    seg = timed("graphcut", 0.97, segment_triangles, f255, area, mesh.adjacency, cent,
+    seg = timed("graphcut", 0.9, segment_triangles, f255, area, mesh.adjacency, cent,
                 levels=levels,
                 step_threshold=step_threshold, merge_k=merge_k, merge_rel=merge_rel,
                 merge_floor=merge_floor, merge_threshold=merge_threshold,
@@ -175,8 +177,9 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
                 min_material_area=min_material_area, min_pocket_area=min_pocket_area,
                 n_materials=n_materials, theta=theta, lam=lam, beta=beta,
                 edge_length=edge_len)
-    bedges, bsides = timed("boundary", 1.0, material_boundary, mesh.shared_edges,
+    bedges, bsides = timed("boundary", 0.99, material_boundary, mesh.shared_edges,
                            mesh.adjacency, seg.material)
+    report(1.0, "done")
     k = seg.material.max() + 1
     mat_gray = np.bincount(seg.material, area * gray, k) / np.bincount(seg.material, area, k)
     diagnostics = {
