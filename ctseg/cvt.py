@@ -186,7 +186,7 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
     on = line0 >= 0
     sites[on] = bary0[on]
     constraint[on] = line0[on]
-    sites[corner_sites] = _pin_corners(sites, rho.shape)[0][corner_sites]
+    sites[corner_sites] = [[0, 0], [cols - 1, 0], [0, rows - 1], [cols - 1, rows - 1]]
     constraint[corner_sites] = -2
     if len(np.unique(sites, axis=0)) != n:
         raise InputError("sites: two starting sites coincide after snapping to the border")

@@ -368,6 +368,28 @@ def _partial_volume_triangles(f, material, interior, adjacency, means):
     return mat
 
 
+def order_by_gray(material, gray, area):
+    """Renumber materials 0..K-1 by the area-weighted mean gray of what each holds.
+
+    On a coarse mesh the partial-volume rules can make that order differ from the order of
+    the gray levels, so numbering always follows what the triangles hold.
+
+    Returns
+    -------
+    material : (m,) int64 ndarray
+    mean_gray : (K,) ndarray, ascending
+    old_ids : (K,) ndarray, the input label of each new material
+    """
+    used, inv = np.unique(np.asarray(material), return_inverse=True)
+    k = len(used)
+    inv = inv.reshape(-1)
+    mean = np.bincount(inv, area * gray, k) / np.bincount(inv, area, k)
+    order = np.argsort(mean, kind="stable")
+    rank = np.empty(k, np.int64)
+    rank[order] = np.arange(k)
+    return rank[inv], mean[order], used[order]
+
+
 def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, merge_k=5.0,
                       merge_rel=0.2, merge_floor=2.0, merge_threshold=None, min_triangles=2,
                       max_depth=32, min_material_area=None, min_pocket_area=4.0,
@@ -514,10 +536,8 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
         f, area, adjacency, centroids, interior, edges, means, min_pocket_area,
         4.0 * min_material_area, min_triangles, max_depth, cut_params, edge_length)
     material = _partial_volume_triangles(f, material, interior, adjacency, means)
-    used, material = np.unique(material, return_inverse=True)
-    k = len(used)
-    mat_gray = np.bincount(material, area * f, k) / np.bincount(material, area, k)
-    return MaterialSegmentation(material=material.reshape(-1), material_gray=mat_gray,
+    material, mat_gray, used = order_by_gray(material, f, area)
+    return MaterialSegmentation(material=material, material_gray=mat_gray,
                                 mode_gray=means[used], leaf=leaf, graphcut_calls=calls,
                                 max_depth_reached=deepest, step_noise=s,
                                 step_threshold=step_threshold, material_noise=sigma)

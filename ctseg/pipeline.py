@@ -10,7 +10,7 @@ from .cvt import lloyd_cvt
 from .density import density_map
 from .errors import ParameterError
 from .intensity import estimate_noise, rescale_gray
-from .materials import pixel_material_levels, segment_triangles
+from .materials import order_by_gray, pixel_material_levels, segment_triangles
 from .sites import initial_sites
 from .triangle_gray import triangle_gray
 from .triangulation import delaunay_mesh, triangle_areas
@@ -177,11 +177,12 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
                 min_material_area=min_material_area, min_pocket_area=min_pocket_area,
                 n_materials=n_materials, theta=theta, lam=lam, beta=beta,
                 edge_length=edge_len)
+    # numbered by mean gray in the input's units (the 0-255 copy is clipped)
+    material, mat_gray, _ = order_by_gray(seg.material, gray, area)
+    k = len(mat_gray)
     bedges, bsides = timed("boundary", 0.99, material_boundary, mesh.shared_edges,
-                           mesh.adjacency, seg.material)
+                           mesh.adjacency, material)
     report(1.0, "done")
-    k = seg.material.max() + 1
-    mat_gray = np.bincount(seg.material, area * gray, k) / np.bincount(seg.material, area, k)
     diagnostics = {
         "image_shape": list(img.shape),
         "n_sites": int(n_sites),
@@ -205,7 +206,7 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         "recursion_depth": int(seg.max_depth_reached),
         "material_gray": [float(v) for v in mat_gray],
     }
-    return SegmentedMesh(points=mesh.points, triangles=mesh.triangles, material=seg.material,
+    return SegmentedMesh(points=mesh.points, triangles=mesh.triangles, material=material,
                          gray=gray, boundary_edges=bedges, boundary_sides=bsides,
                          material_gray=mat_gray, adjacency=mesh.adjacency, shape=img.shape,
                          diagnostics=diagnostics, density=rho, cvt_labels=cvt.labels)

@@ -204,6 +204,9 @@ def ward_sites(rho, n_sites, block_px=None):
     if len(w) < n_sites:  # blocks too coarse for this many sites: fall back to pixels
         w, c, e = _block_graph(rho, 1)
     _, _, centroids = ward_agglomerate(w, c, e, n_sites)
+    # a weighted mean of pixel centres can land one rounding error outside the image
+    centroids[:, 0] = np.clip(centroids[:, 0], 0, rho.shape[1] - 1)
+    centroids[:, 1] = np.clip(centroids[:, 1], 0, rho.shape[0] - 1)
     return centroids
 
 
