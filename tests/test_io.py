@@ -9,7 +9,7 @@ from ctseg.filters import (array_to_image, boundary_to_polydata, mesh_to_polydat
                            polydata_to_arrays, read_image, read_polydata, write_polydata)
 from ctseg.filters.convert import ImageGeometry
 
-from dicom_writer import write_ct_dicom, write_tiff16
+from file_writers import write_ct_dicom, write_tiff16
 
 
 def _vtk_write(writer_cls, path, arr):

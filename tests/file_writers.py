@@ -1,4 +1,4 @@
-"""A minimal DICOM (explicit VR little endian) CT file writer, for tests only."""
+"""Minimal DICOM (explicit VR little endian) and baseline TIFF writers, for tests only."""
 import struct
 
 import numpy as np
