@@ -10,8 +10,6 @@ import json
 import os
 import time
 
-import numpy as np
-
 import ctseg
 from ctseg.metrics import evaluate
 from ctseg.phantoms import MATERIALS, make_phantom

@@ -33,7 +33,6 @@ def status_mib(field):
 def prepare(size, seed, folder):
     import ctseg
     from ctseg.intensity import rescale_gray
-    from ctseg.materials import pixel_material_levels
     from ctseg.phantoms import make_phantom
     from ctseg.triangulation import triangle_areas
 
