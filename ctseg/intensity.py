@@ -6,7 +6,34 @@ from ._validate import as_image
 GRAY_MAX = 255.0
 
 
-def rescale_gray(image, low_pct=0.5, high_pct=99.5):
+def gray_scale(values, low_pct=0.5, high_pct=99.5):
+    """The robust map of gray values onto [0, 255]: ``(offset, factor)``.
+
+    ``offset`` is the ``low_pct`` percentile and ``255 / factor`` the span up to the
+    ``high_pct`` percentile (the true extremes where those collapse). Works on any array,
+    so one map can serve every slice of a volume.
+
+    Parameters
+    ----------
+    values : array_like
+        Finite gray values of any shape.
+    low_pct, high_pct : float
+
+    Returns
+    -------
+    offset, factor : float
+        ``factor`` is 0 for constant values.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    lo, hi = np.percentile(v, [low_pct, high_pct])
+    if hi <= lo:  # percentiles collapse: fall back on the true extremes
+        lo, hi = float(v.min()), float(v.max())
+    if hi <= lo:
+        return float(lo), 0.0
+    return float(lo), float(GRAY_MAX / (hi - lo))
+
+
+def rescale_gray(image, low_pct=0.5, high_pct=99.5, scale=None):
     """Map gray values robustly onto [0, 255].
 
     The paper's energy constants (lambda = 70, beta = 0.286, theta) assume 8-bit gray values.
@@ -20,6 +47,9 @@ def rescale_gray(image, low_pct=0.5, high_pct=99.5):
     low_pct, high_pct : float
         Percentiles mapped to 0 and 255; values beyond them are clipped, so a few hot
         pixels or metal streaks do not squash the materials into a narrow band.
+    scale : (offset, factor), optional
+        A map found elsewhere (:func:`gray_scale` of a whole volume); replaces the
+        percentiles of this image.
 
     Returns
     -------
@@ -35,13 +65,10 @@ def rescale_gray(image, low_pct=0.5, high_pct=99.5):
         If the image is not a finite 2D numeric array.
     """
     img = as_image(image)
-    lo, hi = np.percentile(img, [low_pct, high_pct])
-    if hi <= lo:  # percentiles collapse: fall back on the true extremes
-        lo, hi = float(img.min()), float(img.max())
-    if hi <= lo:
-        return np.zeros_like(img), (float(lo), 0.0)
-    factor = GRAY_MAX / (hi - lo)
-    return np.clip((img - lo) * factor, 0.0, GRAY_MAX), (float(lo), float(factor))
+    offset, factor = gray_scale(img, low_pct, high_pct) if scale is None else map(float, scale)
+    if factor == 0.0:
+        return np.zeros_like(img), (offset, 0.0)
+    return np.clip((img - offset) * factor, 0.0, GRAY_MAX), (offset, factor)
 
 
 def estimate_noise(image):

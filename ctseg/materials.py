@@ -310,9 +310,10 @@ def pixel_material_levels(image255, flat, merge_k=5.0, merge_rel=0.2, merge_floo
 
     Parameters
     ----------
-    image255 : (rows, cols) array_like
-        The image on the 0-255 scale (:func:`ctseg.intensity.rescale_gray`).
-    flat : (rows, cols) bool array_like
+    image255 : (rows, cols) or (n, rows, cols) array_like
+        The image, or a stack of slices, on the 0-255 scale
+        (:func:`ctseg.intensity.rescale_gray`).
+    flat : bool array_like, the shape of ``image255``
         Pixels away from edges (e.g. where the density map is below half its range).
     merge_k, merge_rel, merge_floor : float
         Separation rule of :func:`material_modes`; sigma is the spread of the flat pixels
@@ -329,7 +330,9 @@ def pixel_material_levels(image255, flat, merge_k=5.0, merge_rel=0.2, merge_floo
     """
     from scipy.ndimage import uniform_filter
 
-    img = uniform_filter(np.asarray(image255, float), 3, mode="nearest")
+    img = np.asarray(image255, float)
+    # smooth within each slice only: neighbouring slices can be far apart
+    img = uniform_filter(img, (1,) * (img.ndim - 2) + (3, 3), mode="nearest")
     flat = np.asarray(flat, bool)
     v = img[flat] if flat.sum() >= 16 else img.ravel()
     w = np.ones(len(v))

@@ -1,4 +1,5 @@
 """The whole 2D method in one call: image -> segmented triangle mesh (paper sections 5-6)."""
+import inspect
 import time
 from dataclasses import dataclass, field
 
@@ -72,13 +73,69 @@ class SegmentedMesh:
         return chain_polylines(self.boundary_edges, self.boundary_sides)
 
 
+def flat_pixels(image, sigma=1.0, density_floor=0.02, density_saturation="auto"):
+    """Pixels away from material edges: the un-sharpened density below half its range.
+
+    These pixels measure the material gray levels (:func:`material_levels`); the ridge
+    sharpening of the density is left out because it thins the edge bands.
+
+    Parameters
+    ----------
+    image : (rows, cols) array_like
+    sigma, density_floor, density_saturation
+        As in :func:`ctseg.density_map`.
+
+    Returns
+    -------
+    flat : (rows, cols) bool ndarray
+    """
+    strength = density_map(image, sigma=sigma, floor=density_floor,
+                           saturation=density_saturation)
+    return (strength - density_floor) < 0.5
+
+
+def material_levels(images, scale, *, sigma=1.0, density_floor=0.02,
+                    density_saturation="auto", merge_k=5.0, merge_rel=0.2, merge_floor=2.0,
+                    n_materials=None):
+    """Material gray levels (0-255 scale) seen in one slice or in a stack of slices.
+
+    The modes of the histogram of the pixels away from edges
+    (:func:`ctseg.materials.pixel_material_levels`). Given a stack, the pixels of all its
+    slices count together, so every slice of a volume is labelled against the same levels
+    and material numbers agree across slices.
+
+    Parameters
+    ----------
+    images : (rows, cols) or (n, rows, cols) array_like
+    scale : (offset, factor)
+        The map onto 0-255 (:func:`ctseg.intensity.gray_scale`).
+    sigma, density_floor, density_saturation
+        Define the flat pixels (:func:`flat_pixels`).
+    merge_k, merge_rel, merge_floor, n_materials
+        Mode separation rule and exact count (:func:`ctseg.materials.material_modes`).
+
+    Returns
+    -------
+    levels : (K,) ndarray, ascending
+    sigma_255 : float
+        Noise of the dominant material's flat pixels (0-255 scale).
+    """
+    stack = np.asarray(images)
+    stack = stack[None] if stack.ndim == 2 else stack
+    g255 = np.stack([rescale_gray(sl, scale=scale)[0] for sl in stack])
+    flat = np.stack([flat_pixels(sl, sigma, density_floor, density_saturation) for sl in stack])
+    return pixel_material_levels(g255, flat, merge_k=merge_k, merge_rel=merge_rel,
+                                 merge_floor=merge_floor, n_materials=n_materials)
+
+
 def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, density_floor=0.02,
                   density_saturation="auto", density_ridge=2.0,
                   ward_block_px=None, tol_px=0.01, max_iter=200, step_threshold=None,
                   merge_k=5.0, merge_rel=0.2, merge_floor=2.0, merge_threshold=None,
                   n_materials=None, theta=None, lam=70.0, beta=0.286, min_triangles=2,
                   max_depth=32, min_material_area=None, min_pocket_area=4.0,
-                  weight_by_edge_length=False, progress=None):
+                  weight_by_edge_length=False, gray_scale=None, levels_255=None,
+                  progress=None):
     """Segment a 2D gray image into a triangle mesh with one material per triangle.
 
     density map (SPEC 1) -> initial sites (SPEC 2) -> Lloyd CVT (SPEC 3) -> Delaunay mesh
@@ -106,6 +163,13 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         :func:`ctseg.materials.segment_triangles`.
     weight_by_edge_length : bool
         Multiply n-links by the shared edge length (an option, not the paper's).
+    gray_scale : (offset, factor), optional
+        Map of gray values onto 0-255 found elsewhere (a whole volume's,
+        :func:`ctseg.intensity.gray_scale`); default: this image's percentiles.
+    levels_255 : (K,) array_like, optional
+        Material gray levels found elsewhere (:func:`material_levels` of a whole volume).
+        Then material k is level k, whether or not this slice holds it, so numbers agree
+        across slices, and ``material_gray`` holds the levels in the input's units.
     progress : callable, optional
         Called as ``progress(fraction_done, stage_name)`` when each stage starts, after
         every Lloyd iteration, and with ``(1.0, "done")`` at the end.
@@ -136,6 +200,8 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
             f"n_sites: {n_sites} sites for an image of {img.shape[0]} x {img.shape[1]} = "
             f"{img.size} pixels; use at most {img.size}")
     seed = check_number(seed, "seed", low=0, integer=True)
+    if n_materials is not None:  # checked again where used; here to fail before the CVT
+        check_number(n_materials, "n_materials", low=1, integer=True)
     times = {}
     report = progress or (lambda frac, stage: None)
 
@@ -146,7 +212,7 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         times[name] = time.perf_counter() - t0
         return out
 
-    g255, (offset, factor) = timed("rescale", 0.0, rescale_gray, img)
+    g255, scale = timed("rescale", 0.0, rescale_gray, img, scale=gray_scale)
     noise = estimate_noise(g255)
     rho = timed("density", 0.01, density_map, img, sigma=sigma, floor=density_floor,
                 saturation=density_saturation, ridge=density_ridge)
@@ -156,46 +222,35 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
                 progress=lambda it, n: report(0.2 + 0.5 * it / max(n, 1), "cvt"))
     mesh = timed("triangulation", 0.7, delaunay_mesh, cvt.sites)
     gray = timed("triangle_gray", 0.71, triangle_gray, img, mesh.points, mesh.triangles)
-    f255 = np.clip((gray - offset) * factor, 0.0, 255.0)
-    area = triangle_areas(mesh.points, mesh.triangles)
-    cent = mesh.points[mesh.triangles].mean(axis=1)
-    edge_len = None
-    if weight_by_edge_length:
-        d = mesh.points[mesh.shared_edges[:, 0]] - mesh.points[mesh.shared_edges[:, 1]]
-        edge_len = np.hypot(d[:, 0], d[:, 1])
-    # pixels away from edges, judged without the ridge sharpening (it thins edge bands)
-    strength = rho if not density_ridge else density_map(
-        img, sigma=sigma, floor=density_floor, saturation=density_saturation)
-    flat = (strength - density_floor) < 0.5
-    levels, pixel_sigma = pixel_material_levels(g255, flat, merge_k=merge_k, merge_rel=merge_rel,
-                                                merge_floor=merge_floor, n_materials=n_materials)
-    seg = timed("graphcut", 0.9, segment_triangles, f255, area, mesh.adjacency, cent,
-                levels=levels,
-                step_threshold=step_threshold, merge_k=merge_k, merge_rel=merge_rel,
-                merge_floor=merge_floor, merge_threshold=merge_threshold,
-                min_triangles=min_triangles, max_depth=max_depth,
-                min_material_area=min_material_area, min_pocket_area=min_pocket_area,
-                n_materials=n_materials, theta=theta, lam=lam, beta=beta,
-                edge_length=edge_len)
-    # numbered by mean gray in the input's units (the 0-255 copy is clipped)
-    material, mat_gray, _ = order_by_gray(seg.material, gray, area)
-    k = len(mat_gray)
+    report(0.9, "graphcut")
+    t0 = time.perf_counter()
+    labels = label_mesh(img, mesh, gray, scale=scale, levels_255=levels_255, sigma=sigma,
+                        density_floor=density_floor, density_saturation=density_saturation,
+                        step_threshold=step_threshold, merge_k=merge_k, merge_rel=merge_rel,
+                        merge_floor=merge_floor, merge_threshold=merge_threshold,
+                        n_materials=n_materials, theta=theta, lam=lam, beta=beta,
+                        min_triangles=min_triangles, max_depth=max_depth,
+                        min_material_area=min_material_area, min_pocket_area=min_pocket_area,
+                        weight_by_edge_length=weight_by_edge_length)
+    times["graphcut"] = time.perf_counter() - t0
+    material, mat_gray = labels.material, labels.material_gray
     bedges, bsides = timed("boundary", 0.99, material_boundary, mesh.shared_edges,
                            mesh.adjacency, material)
     report(1.0, "done")
+    seg = labels.segmentation
     diagnostics = {
         "image_shape": list(img.shape),
         "n_sites": int(n_sites),
         "n_triangles": int(len(mesh.triangles)),
-        "n_materials": int(k),
+        "n_materials": int(len(mat_gray)),
         "init": init,
         "seed": int(seed),
         "pixel_noise_255": noise,
         "step_noise_255": seg.step_noise,
         "step_threshold_255": seg.step_threshold,
-        "material_noise_255": pixel_sigma,
-        "material_levels_255": [float(v) for v in seg.mode_gray],
-        "gray_rescale": {"offset": offset, "factor": factor},
+        "material_noise_255": labels.pixel_sigma,
+        "material_levels_255": [float(v) for v in labels.levels_255],
+        "gray_rescale": {"offset": scale[0], "factor": scale[1]},
         "times_s": times,
         "total_time_s": float(sum(times.values())),
         "cvt_energy": [float(e) for e in cvt.energy],
@@ -210,3 +265,110 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
                          gray=gray, boundary_edges=bedges, boundary_sides=bsides,
                          material_gray=mat_gray, adjacency=mesh.adjacency, shape=img.shape,
                          diagnostics=diagnostics, density=rho, cvt_labels=cvt.labels)
+
+
+@dataclass
+class MeshLabels:
+    """Outcome of :func:`label_mesh`: ``material`` per triangle, ``material_gray`` (input
+    units), the ``levels_255`` used, the pixel noise ``pixel_sigma`` (0-255 scale; 0 when
+    the levels were given) and the raw :class:`ctseg.materials.MaterialSegmentation`."""
+
+    material: np.ndarray
+    material_gray: np.ndarray
+    levels_255: np.ndarray
+    pixel_sigma: float
+    segmentation: object
+
+
+def label_mesh(image, mesh, gray, *, scale=None, levels_255=None, sigma=1.0,
+               density_floor=0.02, density_saturation="auto", step_threshold=None,
+               merge_k=5.0, merge_rel=0.2, merge_floor=2.0, merge_threshold=None,
+               n_materials=None, theta=None, lam=70.0, beta=0.286, min_triangles=2,
+               max_depth=32, min_material_area=None, min_pocket_area=4.0,
+               weight_by_edge_length=False):
+    """One material per triangle of a mesh over an image (SPEC 6-7): the last stage.
+
+    Material levels come from the image's flat pixels (:func:`material_levels`) unless
+    ``levels_255`` gives them; then the recursive graph cut
+    (:func:`ctseg.materials.segment_triangles`) labels the triangles.
+
+    Parameters
+    ----------
+    image : (rows, cols) array_like
+        The image the mesh was made on.
+    mesh : TriangleMesh
+        From :func:`ctseg.delaunay_mesh` (its adjacency and shared edges are used).
+    gray : (m,) array_like
+        Triangle mean gray in the image's units (:func:`ctseg.triangle_gray`).
+    scale : (offset, factor), optional
+        Map onto 0-255; default the image's own (:func:`ctseg.intensity.rescale_gray`).
+    levels_255 : (K,) array_like, optional
+        Fixed material levels: material k is level k (numbers agree across slices).
+    other parameters
+        As in :func:`segment_image`.
+
+    Returns
+    -------
+    MeshLabels
+        Materials 0..K-1 by ascending mean gray of what they hold (or by level, given
+        ``levels_255``).
+
+    Raises
+    ------
+    ParameterError
+        Out-of-range parameters, or ``gray`` not one value per triangle.
+    """
+    img = as_image(image)
+    if n_materials is not None:
+        n_materials = check_number(n_materials, "n_materials", low=1, integer=True)
+    gray = np.asarray(gray, float)
+    if gray.shape != (len(mesh.triangles),):
+        raise ParameterError(f"gray: expected one value per triangle ({len(mesh.triangles)}), "
+                             f"got shape {gray.shape}")
+    if scale is None:
+        scale = rescale_gray(img)[1]
+    offset, factor = scale
+    f255 = np.clip((gray - offset) * factor, 0.0, 255.0)
+    area = triangle_areas(mesh.points, mesh.triangles)
+    cent = mesh.points[mesh.triangles].mean(axis=1)
+    edge_len = None
+    if weight_by_edge_length:
+        d = mesh.points[mesh.shared_edges[:, 0]] - mesh.points[mesh.shared_edges[:, 1]]
+        edge_len = np.hypot(d[:, 0], d[:, 1])
+    pixel_sigma = 0.0
+    fixed = levels_255 is not None
+    if fixed:
+        levels = np.sort(np.asarray(levels_255, float).ravel())
+        if len(levels) == 0 or not np.all(np.isfinite(levels)):
+            raise ParameterError(f"levels_255: need finite gray levels, got {levels_255!r}")
+        if n_materials is not None and len(levels) != n_materials:
+            raise ParameterError(f"levels_255: {len(levels)} levels given for n_materials={n_materials}")
+    else:
+        levels, pixel_sigma = material_levels(
+            img, scale, sigma=sigma, density_floor=density_floor,
+            density_saturation=density_saturation, merge_k=merge_k, merge_rel=merge_rel,
+            merge_floor=merge_floor, n_materials=n_materials)
+    seg = segment_triangles(f255, area, mesh.adjacency, cent, levels=levels,
+                            step_threshold=step_threshold, merge_k=merge_k, merge_rel=merge_rel,
+                            merge_floor=merge_floor, merge_threshold=merge_threshold,
+                            min_triangles=min_triangles, max_depth=max_depth,
+                            min_material_area=min_material_area,
+                            min_pocket_area=min_pocket_area, theta=theta, lam=lam, beta=beta,
+                            edge_length=edge_len)
+    if fixed:
+        # one numbering for every slice: the index of the level the material was cut at
+        material = np.searchsorted(levels, seg.mode_gray)[seg.material]
+        mat_gray = levels / factor + offset if factor else np.full(len(levels), offset)
+    else:
+        # numbered by mean gray in the input's units (the 0-255 copy is clipped)
+        material, mat_gray, _ = order_by_gray(seg.material, gray, area)
+    return MeshLabels(material=material.astype(np.int64), material_gray=np.asarray(mat_gray, float),
+                      levels_255=seg.mode_gray if not fixed else levels,
+                      pixel_sigma=float(pixel_sigma), segmentation=seg)
+
+
+SEGMENT_DEFAULTS = {name: p.default for name, p in inspect.signature(segment_image).parameters.items()
+                    if p.kind is p.KEYWORD_ONLY
+                    and name not in ("gray_scale", "levels_255", "progress")}
+"""Every tuning keyword of :func:`segment_image` with its default (the volume driver and the
+filters take the same names)."""
