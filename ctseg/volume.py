@@ -1,0 +1,289 @@
+"""3D volumes, slice by slice (SPEC 8): one gray map and one set of material levels for the
+whole volume, slices segmented in this process, in local worker processes or on a Dask
+cluster, with the same result whichever runs them."""
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._validate import as_image, check_number
+from .errors import CTSegError, InputError, ParameterError
+from .intensity import gray_scale
+from .pipeline import SEGMENT_DEFAULTS, SegmentedMesh, material_levels, segment_image
+
+AXES = {"z": 0, "y": 1, "x": 2}
+"""Slice axis name -> axis of the (nz, ny, nx) array (VTK's k, j, i)."""
+
+LEVEL_SAMPLE_VOXELS = 1 << 25
+"""At most this many voxels (evenly spaced whole slices) measure the gray map and levels."""
+
+
+def slice_axis(axis):
+    """Numpy axis (0, 1, 2) of a slice axis given as 'z'/'y'/'x' or 0/1/2 (numpy order)."""
+    if isinstance(axis, str) and axis.lower() in AXES:
+        return AXES[axis.lower()]
+    if isinstance(axis, (int, np.integer)) and not isinstance(axis, bool) and 0 <= axis <= 2:
+        return int(axis)
+    raise ParameterError(f"axis: expected 'z', 'y' or 'x' (or 0, 1, 2), got {axis!r}")
+
+
+def volume_slice(volume, axis, k):
+    """Slice ``k`` along ``axis`` of an (nz, ny, nx) volume as a (rows, cols) image.
+
+    Along z the slice is ``volume[k]`` (rows = y, cols = x); along y it is
+    ``volume[:, k, :]`` (rows = z, cols = x); along x ``volume[:, :, k]`` (rows = z,
+    cols = y). :func:`slice_to_volume_index` maps its pixel coordinates back.
+    """
+    return np.take(volume, k, axis=slice_axis(axis))
+
+
+def slice_to_volume_index(points, axis, k):
+    """Points (x=col, y=row) of slice ``k`` -> (i, j, k) index coordinates of the volume
+    (VTK's order: i along x, j along y, k along z)."""
+    pts = np.asarray(points, float).reshape(-1, 2)
+    col, row, pos = pts[:, 0], pts[:, 1], np.full(len(pts), float(k))
+    ax = slice_axis(axis)
+    if ax == 0:
+        return np.column_stack([col, row, pos])
+    if ax == 1:
+        return np.column_stack([col, pos, row])
+    return np.column_stack([pos, col, row])
+
+
+@dataclass
+class VolumeSegmentation:
+    """Outcome of :func:`segment_volume`.
+
+    Attributes
+    ----------
+    slices : list of SegmentedMesh
+        One per slice along ``axis``, in slice order; material k means the same material in
+        every slice. The per-pixel maps (``density``, ``cvt_labels``) are dropped to keep
+        memory bounded.
+    axis : int
+        Numpy axis of the (nz, ny, nx) volume that was sliced.
+    material_gray : (K,) ndarray
+        Gray level of each material in the input's units.
+    diagnostics : dict
+        The gray map, levels, executor, per-stage times summed over slices, wall time.
+    """
+
+    slices: list
+    axis: int
+    material_gray: np.ndarray
+    diagnostics: dict = field(default_factory=dict)
+
+    @property
+    def n_materials(self):
+        return len(self.material_gray)
+
+
+def _segment_slice(image, params):
+    """Worker: one slice, the per-pixel maps dropped (they are as large as the slice)."""
+    seg = segment_image(image, **params)
+    seg.density = None
+    seg.cvt_labels = None
+    return seg
+
+
+def _sample_slices(n_slices, slice_voxels):
+    """Evenly spaced slice indices whose voxels stay within LEVEL_SAMPLE_VOXELS."""
+    n_keep = max(1, min(n_slices, LEVEL_SAMPLE_VOXELS // max(slice_voxels, 1)))
+    return np.unique(np.linspace(0, n_slices - 1, n_keep).round().astype(int))
+
+
+def _as_volume(volume):
+    try:
+        vol = np.asarray(volume)
+    except Exception as exc:
+        raise InputError(f"volume: cannot be read as an array ({exc})") from None
+    if vol.ndim == 2:
+        vol = vol[None]
+    if vol.ndim != 3:
+        raise InputError(f"volume: expected a 3D array (slices, rows, cols), got shape {vol.shape}")
+    if vol.size == 0:
+        raise InputError(f"volume: the array is empty (shape {vol.shape})")
+    return vol
+
+
+def _run_local(tasks, n_jobs, on_done):
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    import multiprocessing
+
+    results = [None] * len(tasks)
+    # fork where there is one: spawn and forkserver start sys.executable, which inside
+    # ParaView or Slicer is the application itself, and re-run the caller's __main__
+    method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+    with ProcessPoolExecutor(max_workers=n_jobs,
+                             mp_context=multiprocessing.get_context(method)) as pool:
+        futures = {pool.submit(_segment_slice, img, params): k for k, (img, params) in enumerate(tasks)}
+        try:
+            for fut in as_completed(futures):
+                k = futures[fut]
+                results[k] = _slice_result(fut.result, k)
+                on_done(k)
+        except BaseException:
+            for fut in futures:
+                fut.cancel()
+            raise
+    return results
+
+
+def _run_dask(tasks, client, on_done):
+    from distributed import Client, as_completed
+
+    own = isinstance(client, str)
+    if own:
+        client = Client(client)
+    try:
+        futures = client.map(_segment_slice, [t[0] for t in tasks], [t[1] for t in tasks],
+                             pure=False)
+        index = {f.key: k for k, f in enumerate(futures)}
+        results = [None] * len(tasks)
+        try:
+            for fut in as_completed(futures):
+                k = index[fut.key]
+                results[k] = _slice_result(fut.result, k)
+                on_done(k)
+        except BaseException:
+            client.cancel(futures)
+            raise
+        return results
+    finally:
+        if own:
+            client.close()
+
+
+def _slice_result(get, k):
+    try:
+        return get()
+    except CTSegError as exc:
+        raise type(exc)(f"slice {k}: {exc}") from exc
+
+
+def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=None,
+                   progress=None, **params):
+    """Segment a 3D volume slice by slice into triangle meshes with one numbering of the
+    materials for the whole volume.
+
+    The gray map onto 0-255 (:func:`ctseg.intensity.gray_scale`) and the material levels
+    (:func:`ctseg.pipeline.material_levels`) are measured once on the volume (on evenly
+    spaced whole slices, at most 2^25 voxels), then every slice is segmented against them
+    (:func:`ctseg.segment_image` with ``gray_scale`` and ``levels_255``): material k is the
+    same material in every slice, whether or not a slice holds it. A volume of one slice is
+    a 2D problem with the volume's numbering.
+
+    Parameters
+    ----------
+    volume : (nz, ny, nx) array_like
+        The CT volume (a (rows, cols) array is one slice).
+    axis : {'z', 'y', 'x'} or {0, 1, 2}
+        Slice axis (see :func:`volume_slice` for the orientation of each slice).
+    n_sites : int, optional
+        Sites per slice; default one per 128 pixels of a slice.
+    seed : int
+        Seed of every slice's random initialisation.
+    n_jobs : int
+        Local worker processes (1 = in this process, 0 = one per CPU core).
+    client : distributed.Client or str, optional
+        A Dask client, or a scheduler address to connect to for this call; slices then run
+        on that cluster and ``n_jobs`` is ignored.
+    progress : callable, optional
+        ``progress(fraction_done, message)`` after each slice.
+    **params
+        Any keyword of :func:`ctseg.segment_image` (``n_materials``, ``lam``, ...).
+
+    Returns
+    -------
+    VolumeSegmentation
+
+    Raises
+    ------
+    InputError
+        Not a 3D (or 2D) finite numeric array; a slice's error names the slice.
+    ParameterError
+        Unknown parameter, bad axis, n_jobs < 0.
+    """
+    vol = _as_volume(volume)
+    ax = slice_axis(axis)
+    unknown = sorted(set(params) - set(SEGMENT_DEFAULTS))
+    if unknown:
+        raise ParameterError(f"segment_volume: unknown parameter(s) {', '.join(unknown)}; "
+                             f"valid: {', '.join(sorted(SEGMENT_DEFAULTS))}")
+    n_jobs = check_number(n_jobs, "n_jobs", low=0, integer=True)
+    if n_jobs == 0:
+        n_jobs = os.cpu_count() or 1
+    n_slices = vol.shape[ax]
+    report = progress or (lambda frac, msg: None)
+    t_start = time.perf_counter()
+
+    report(0.0, "gray levels")
+    sample = _sample_slices(n_slices, vol.size // n_slices)
+    stack = np.stack([as_image(volume_slice(vol, ax, k), name=f"slice {k}") for k in sample])
+    scale = gray_scale(stack)
+    level_keys = ("sigma", "density_floor", "density_saturation", "merge_k", "merge_rel",
+                  "merge_floor", "n_materials")
+    merged = {**SEGMENT_DEFAULTS, **params}
+    levels, pixel_sigma = material_levels(stack, scale, **{k: merged[k] for k in level_keys})
+    del stack
+    slice_params = dict(params, n_sites=n_sites, seed=seed, gray_scale=scale, levels_255=levels)
+    slice_params.pop("n_materials", None)  # fixed by the levels
+    t_levels = time.perf_counter() - t_start
+
+    tasks = [(np.ascontiguousarray(volume_slice(vol, ax, k)), slice_params) for k in range(n_slices)]
+    done = [0]
+
+    def on_done(k):
+        done[0] += 1
+        report(done[0] / n_slices, f"slice {done[0]}/{n_slices}")
+
+    if client is not None:
+        executor = "dask"
+        slices = _run_dask(tasks, client, on_done)
+    elif n_jobs > 1 and n_slices > 1:
+        executor = f"{min(n_jobs, n_slices)} processes"
+        slices = _run_local(tasks, min(n_jobs, n_slices), on_done)
+    else:
+        executor = "serial"
+        slices = []
+        for k, (img, prm) in enumerate(tasks):
+            slices.append(_slice_result(lambda: _segment_slice(img, prm), k))
+            on_done(k)
+    factor = scale[1]
+    mat_gray = levels / factor + scale[0] if factor else np.full(len(levels), scale[0])
+    times = {}
+    for s in slices:
+        for name, t in s.diagnostics["times_s"].items():
+            times[name] = times.get(name, 0.0) + t
+    diagnostics = {
+        "volume_shape": list(vol.shape),
+        "axis": "zyx"[ax],
+        "n_slices": int(n_slices),
+        "executor": executor,
+        "gray_rescale": {"offset": scale[0], "factor": scale[1]},
+        "level_sample_slices": [int(k) for k in sample],
+        "material_levels_255": [float(v) for v in levels],
+        "material_noise_255": float(pixel_sigma),
+        "material_gray": [float(v) for v in mat_gray],
+        "n_materials": int(len(levels)),
+        "n_triangles": int(sum(len(s.triangles) for s in slices)),
+        "levels_time_s": t_levels,
+        "slice_times_s": times,
+        "wall_time_s": time.perf_counter() - t_start,
+    }
+    return VolumeSegmentation(slices=slices, axis=ax, material_gray=mat_gray,
+                              diagnostics=diagnostics)
+
+
+def volume_labels(vseg, shape):
+    """Per-voxel material labels of a volume segmentation (each slice rasterised)."""
+    from .metrics import label_image
+
+    out = np.zeros(shape, np.int64)
+    for k, seg in enumerate(vseg.slices):
+        lab = label_image(seg.points, seg.triangles, seg.material, seg.shape)
+        idx = [slice(None)] * 3
+        idx[vseg.axis] = k
+        out[tuple(idx)] = lab
+    return out
