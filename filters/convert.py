@@ -98,18 +98,24 @@ def _add_cell_array(poly, values, name, vtk_type=None):
     poly.GetCellData().AddArray(arr)
 
 
-def mesh_to_polydata(points, triangles, material, gray, geometry=None, slice_index=0,
-                     slice_axis_index=0.0):
-    """Triangle mesh in pixel-index coordinates -> vtkPolyData in world coordinates.
+def _world_points(points, geometry, axis, slice_index):
+    from ctseg.volume import slice_to_volume_index
 
-    Cell arrays: ``material`` (int32), ``gray`` (float64, input units), ``slice`` (int32).
-    ``slice_axis_index`` is the (fractional) index along the third axis where the slice sits.
+    return geometry.to_world(slice_to_volume_index(points, axis, slice_index))
+
+
+def mesh_to_polydata(points, triangles, material, gray, geometry=None, slice_index=0, axis="z"):
+    """Triangle mesh of one slice, in its pixel-index coordinates -> vtkPolyData in world
+    coordinates.
+
+    The slice is number ``slice_index`` along ``axis`` of the image the geometry belongs to
+    (see :func:`ctseg.volume.volume_slice` for the orientation of each axis); a 2D image is
+    slice 0 along z. Cell arrays: ``material`` (int32), ``gray`` (float64, input units),
+    ``slice`` (int32).
     """
     geometry = geometry or ImageGeometry()
-    pts = np.asarray(points, float)
-    ijk = np.column_stack([pts[:, 0], pts[:, 1], np.full(len(pts), float(slice_axis_index))])
     poly = vtkPolyData()
-    poly.SetPoints(_points(geometry.to_world(ijk)))
+    poly.SetPoints(_points(_world_points(points, geometry, axis, slice_index)))
     poly.SetPolys(_cells(np.asarray(triangles).ravel(), 3))
     _add_cell_array(poly, np.asarray(material, np.int32), "material")
     _add_cell_array(poly, np.asarray(gray, np.float64), "gray")
@@ -118,16 +124,14 @@ def mesh_to_polydata(points, triangles, material, gray, geometry=None, slice_ind
     return poly
 
 
-def boundary_to_polydata(points, lines, sides, geometry=None, slice_axis_index=0.0):
-    """Boundary polylines (lists of vertex indices) -> vtkPolyData with lines.
+def boundary_to_polydata(points, lines, sides, geometry=None, slice_index=0, axis="z"):
+    """Boundary polylines (lists of vertex indices) of one slice -> vtkPolyData with lines.
 
-    Cell arrays ``material_a`` and ``material_b``: the materials on each side.
+    Cell arrays ``material_a`` and ``material_b`` (the materials on each side) and ``slice``.
     """
     geometry = geometry or ImageGeometry()
-    pts = np.asarray(points, float)
-    ijk = np.column_stack([pts[:, 0], pts[:, 1], np.full(len(pts), float(slice_axis_index))])
     poly = vtkPolyData()
-    poly.SetPoints(_points(geometry.to_world(ijk)))
+    poly.SetPoints(_points(_world_points(points, geometry, axis, slice_index)))
     ca = vtkCellArray()
     if lines:
         offsets = np.concatenate([[0], np.cumsum([len(l) for l in lines])]).astype(np.int64)
@@ -138,7 +142,42 @@ def boundary_to_polydata(points, lines, sides, geometry=None, slice_axis_index=0
     sides = np.asarray(sides, np.int32).reshape(-1, 2)
     _add_cell_array(poly, np.ascontiguousarray(sides[:, 0]), "material_a")
     _add_cell_array(poly, np.ascontiguousarray(sides[:, 1]), "material_b")
+    _add_cell_array(poly, np.full(len(sides), slice_index, np.int32), "slice")
     return poly
+
+
+def append_polydata(parts):
+    """One vtkPolyData from several (the slices of a volume), cell arrays kept."""
+    from vtkmodules.vtkFiltersCore import vtkAppendPolyData
+
+    parts = list(parts)
+    if len(parts) == 1:
+        return parts[0]
+    app = vtkAppendPolyData()
+    for p in parts:
+        app.AddInputData(p)
+    app.Update()
+    out = vtkPolyData()
+    out.ShallowCopy(app.GetOutput())
+    if out.GetCellData().GetArray("material") is not None:
+        out.GetCellData().SetActiveScalars("material")
+    return out
+
+
+def segmentation_to_polydata(result, geometry=None):
+    """A :class:`ctseg.SegmentedMesh` (2D image) or :class:`ctseg.volume.VolumeSegmentation`
+    -> (mesh vtkPolyData, boundary vtkPolyData), all slices in one of each."""
+    slices = getattr(result, "slices", None)
+    axis = "zyx"[result.axis] if slices is not None else "z"
+    slices = slices if slices is not None else [result]
+    meshes, bounds = [], []
+    for k, seg in enumerate(slices):
+        meshes.append(mesh_to_polydata(seg.points, seg.triangles, seg.material, seg.gray,
+                                       geometry, slice_index=k, axis=axis))
+        lines, sides = seg.boundary_polylines()
+        bounds.append(boundary_to_polydata(seg.points, lines, sides, geometry, slice_index=k,
+                                           axis=axis))
+    return append_polydata(meshes), append_polydata(bounds)
 
 
 def polydata_to_arrays(poly):

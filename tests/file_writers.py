@@ -21,19 +21,25 @@ def _elem(group, element, vr, value):
     return head + struct.pack("<H", len(data)) + data
 
 
-def write_ct_dicom(path, pixels, slope=1.0, intercept=0.0, spacing=(1.0, 1.0)):
-    """Write a uint16 (rows, cols) array as a single-frame CT DICOM file."""
+def write_ct_dicom(path, pixels, slope=1.0, intercept=0.0, spacing=(1.0, 1.0),
+                   position=(0.0, 0.0, 0.0), orientation=(1, 0, 0, 0, 1, 0), instance=1,
+                   series_uid="1.2.826.0.1.3680043.2.1125.2.1", description="test series"):
+    """Write a uint16 (rows, cols) array as a single-frame CT DICOM file.
+
+    ``spacing`` is DICOM's PixelSpacing: (between rows, between columns)."""
     pixels = np.ascontiguousarray(pixels, dtype="<u2")
     rows, cols = pixels.shape
-    uid = "1.2.826.0.1.3680043.2.1125.1.1"
+    uid = f"1.2.826.0.1.3680043.2.1125.1.{instance}"
+    ds = lambda vals: "\\".join(f"{v:g}" for v in vals)
     meta_body = (_elem(0x0002, 0x0001, "OB", b"\0\1") + _elem(0x0002, 0x0002, "UI", CT_STORAGE)
                  + _elem(0x0002, 0x0003, "UI", uid) + _elem(0x0002, 0x0010, "UI", EXPLICIT_LE))
     meta = _elem(0x0002, 0x0000, "UL", struct.pack("<I", len(meta_body))) + meta_body
     us = lambda v: struct.pack("<H", v)
     body = b"".join([
         _elem(0x0008, 0x0016, "UI", CT_STORAGE), _elem(0x0008, 0x0018, "UI", uid),
-        _elem(0x0008, 0x0060, "CS", "CT"), _elem(0x0020, 0x0013, "IS", "1"),
-        _elem(0x0020, 0x0032, "DS", "0\\0\\0"), _elem(0x0020, 0x0037, "DS", "1\\0\\0\\0\\1\\0"),
+        _elem(0x0008, 0x0060, "CS", "CT"), _elem(0x0008, 0x103E, "LO", description),
+        _elem(0x0020, 0x000E, "UI", series_uid), _elem(0x0020, 0x0013, "IS", str(instance)),
+        _elem(0x0020, 0x0032, "DS", ds(position)), _elem(0x0020, 0x0037, "DS", ds(orientation)),
         _elem(0x0028, 0x0002, "US", us(1)), _elem(0x0028, 0x0004, "CS", "MONOCHROME2"),
         _elem(0x0028, 0x0010, "US", us(rows)), _elem(0x0028, 0x0011, "US", us(cols)),
         _elem(0x0028, 0x0030, "DS", f"{spacing[0]:g}\\{spacing[1]:g}"),

@@ -1,0 +1,220 @@
+"""Mesh writers behind one function, :func:`write_mesh`, used by the CLI and the plugins.
+
+Every mesh passes :func:`ctseg.meshcheck.check_mesh` (pymeshlab) before anything is written,
+and every file is written under a temporary name in the target folder and renamed at the
+end, so a failed check, an error or an interrupt never leaves a partial file.
+
+Formats: ``.vtp`` (VTK XML PolyData, the default: every cell array), ``.vtu`` (VTK XML
+unstructured grid, same arrays), ``.ply`` (binary; material as face colour and as face
+quality, which MeshLab shows and filters on), ``.stl`` (binary, one file per material:
+``NAME_material<k>.stl``, as STL has no per-face data), ``.obj`` (one group and one
+``usemtl`` per material, colours in a ``.mtl`` beside it).
+"""
+import contextlib
+import os
+import tempfile
+
+import numpy as np
+
+from ctseg.errors import InputError
+
+from .convert import polydata_to_arrays
+
+MESH_FORMATS = (".vtp", ".vtu", ".ply", ".stl", ".obj")
+
+# Material colours: colour-blind-safe (Okabe-Ito), air first; shared with the figure.
+PALETTE = np.array([
+    [40, 40, 40], [230, 159, 0], [86, 180, 233], [0, 158, 115], [240, 228, 66],
+    [0, 114, 178], [213, 94, 0], [204, 121, 167], [150, 150, 150],
+], np.uint8)
+
+
+def material_colors(material):
+    """RGB (uint8) colour of each material number."""
+    return PALETTE[np.asarray(material, np.int64) % len(PALETTE)]
+
+
+def _target(path, ext_expected=None):
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        raise InputError(f"{path}: is a folder; give a file name")
+    ext = os.path.splitext(path)[1].lower()
+    if ext_expected is not None and ext not in ext_expected:
+        raise InputError(f"{path}: unknown output format {ext or '(no extension)'}; "
+                         f"use one of {', '.join(ext_expected)}")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise InputError(f"{path}: the folder {folder} does not exist")
+    if not os.access(folder, os.W_OK):
+        raise InputError(f"{path}: the folder {folder} is not writable")
+    return path, ext
+
+
+@contextlib.contextmanager
+def _atomic(paths):
+    """Yield temporary names beside ``paths``; rename them all onto ``paths`` on success,
+    delete them on any failure."""
+    temps = []
+    try:
+        for p in paths:
+            folder = os.path.dirname(os.path.abspath(p))
+            try:
+                fd, tmp = tempfile.mkstemp(prefix=".ctseg-", suffix=os.path.splitext(p)[1],
+                                           dir=folder)
+            except OSError as exc:
+                raise InputError(f"{p}: cannot write in {folder} ({exc.strerror})") from None
+            os.close(fd)
+            temps.append(tmp)
+        yield temps
+        for tmp, p in zip(temps, paths):
+            os.replace(tmp, p)
+        temps = []
+    finally:
+        for tmp in temps:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+
+
+def _vtk_write(writer, data, tmp, path):
+    writer.SetFileName(tmp)
+    writer.SetInputData(data)
+    writer.SetDataModeToBinary()
+    if writer.Write() != 1:
+        raise InputError(f"{path}: VTK could not write the file")
+
+
+def _write_ply(points, triangles, material, tmp):
+    import pymeshlab
+
+    rgba = np.column_stack([material_colors(material) / 255.0, np.ones(len(material))])
+    mesh = pymeshlab.Mesh(vertex_matrix=points, face_matrix=triangles.astype(np.int32),
+                          f_scalar_array=material.astype(np.float64), f_color_matrix=rgba)
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(mesh)
+    ms.save_current_mesh(tmp, binary=True, save_face_color=True, save_face_quality=True,
+                         save_vertex_color=False, save_vertex_quality=False)
+
+
+def _write_stl(points, triangles, tmp):
+    import pymeshlab
+
+    used = np.unique(triangles)
+    remap = np.full(len(points), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=points[used],
+                               face_matrix=remap[triangles].astype(np.int32)))
+    ms.save_current_mesh(tmp, binary=True)
+
+
+def _write_obj(points, triangles, material, tmp_obj, tmp_mtl, mtl_name):
+    mats = np.unique(material)
+    with open(tmp_mtl, "w") as fh:
+        fh.write("# ctseg materials\n")
+        for k, rgb in zip(mats, material_colors(mats)):
+            fh.write(f"newmtl material_{k}\nKd {rgb[0] / 255:.4f} {rgb[1] / 255:.4f} "
+                     f"{rgb[2] / 255:.4f}\n")
+    with open(tmp_obj, "w") as fh:
+        fh.write(f"# ctseg segmented mesh: one group per material\nmtllib {mtl_name}\n")
+        np.savetxt(fh, points, fmt="v %.9g %.9g %.9g")
+        for k in mats:
+            fh.write(f"g material_{k}\nusemtl material_{k}\n")
+            np.savetxt(fh, triangles[material == k] + 1, fmt="f %d %d %d")
+
+
+def mesh_outputs(path):
+    """The files :func:`write_mesh` writes for ``path`` (all but STL: ``path`` itself, plus
+    the .mtl for OBJ; STL: a pattern with ``{material}``)."""
+    stem, ext = os.path.splitext(os.fspath(path))
+    if ext.lower() == ".stl":
+        return [f"{stem}_material{{material}}.stl"]
+    if ext.lower() == ".obj":
+        return [os.fspath(path), stem + ".mtl"]
+    return [os.fspath(path)]
+
+
+def write_mesh(poly, path, check=True):
+    """Write a segmented triangle mesh (vtkPolyData with a ``material`` cell array).
+
+    Parameters
+    ----------
+    poly : vtkPolyData
+        Triangles in world coordinates, cell arrays ``material`` (and ``gray``, ``slice``).
+    path : str or path-like
+        Output file; the extension picks the format (see the module's docstring).
+    check : bool
+        Run the pymeshlab checks first (on by default; only tests switch it off).
+
+    Returns
+    -------
+    written : list of str
+        The files written.
+
+    Raises
+    ------
+    InputError
+        Unknown extension, missing or unwritable folder, no ``material`` array.
+    MeshCheckError
+        The mesh failed a check; nothing was written.
+    """
+    from ctseg.meshcheck import check_mesh
+
+    path, ext = _target(path, MESH_FORMATS)
+    points, triangles, arrays = polydata_to_arrays(poly)
+    if check:
+        check_mesh(points, triangles, what=path)
+    if ext == ".vtp":
+        from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
+
+        with _atomic([path]) as (tmp,):
+            _vtk_write(vtkXMLPolyDataWriter(), poly, tmp, path)
+        return [path]
+    if ext == ".vtu":
+        from vtkmodules.vtkFiltersCore import vtkAppendFilter
+        from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
+
+        grid = vtkAppendFilter()
+        grid.AddInputData(poly)
+        grid.Update()
+        with _atomic([path]) as (tmp,):
+            _vtk_write(vtkXMLUnstructuredGridWriter(), grid.GetOutput(), tmp, path)
+        return [path]
+    if "material" not in arrays:
+        raise InputError(f"{path}: the mesh has no 'material' cell array to write")
+    material = np.asarray(arrays["material"], np.int64)
+    if ext == ".ply":
+        with _atomic([path]) as (tmp,):
+            _write_ply(points, triangles, material, tmp)
+        return [path]
+    if ext == ".stl":
+        pattern = mesh_outputs(path)[0]
+        mats = np.unique(material)
+        outs = [pattern.format(material=k) for k in mats]
+        with _atomic(outs) as temps:
+            for k, tmp in zip(mats, temps):
+                _write_stl(points, triangles[material == k], tmp)
+        return outs
+    obj, mtl = mesh_outputs(path)
+    with _atomic([obj, mtl]) as (tmp_obj, tmp_mtl):
+        _write_obj(points, triangles, material, tmp_obj, tmp_mtl, os.path.basename(mtl))
+    return [obj, mtl]
+
+
+def write_polydata(poly, path):
+    """Write any vtkPolyData (e.g. boundary polylines) as VTK XML (.vtp), through a
+    temporary name renamed at the end. No mesh checks: use :func:`write_mesh` for meshes."""
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
+
+    path, _ = _target(path, (".vtp",))
+    with _atomic([path]) as (tmp,):
+        _vtk_write(vtkXMLPolyDataWriter(), poly, tmp, path)
+    return path
+
+
+def read_polydata(path):
+    """Read a .vtp file (written by ctseg or anyone) back as vtkPolyData."""
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+
+    from .readers import _vtk_read
+
+    return _vtk_read(vtkXMLPolyDataReader, os.fspath(path), "VTK XML PolyData").GetOutput()
