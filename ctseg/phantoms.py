@@ -266,7 +266,7 @@ def volume_labels_hr(n_slices, size, seed=0, supersample=2, materials=MATERIALS)
     S, nz = float(size), n_slices
     cx, cy = S / 2 + rng.uniform(-0.03, 0.03) * S, S / 2 + rng.uniform(-0.03, 0.03) * S
     r_house, r_bore = rng.uniform(0.36, 0.40) * S, rng.uniform(0.17, 0.19) * S
-    r_bush, r_shaft = r_bore - 0.045 * S, r_bore - 0.08 * S
+    r_bush, r_shaft = r_bore - 0.06 * S, r_bore - 0.11 * S
     ball = (cx + 0.27 * S, cy, 0.5 * nz, 0.06 * S)
     pores = []
     while len(pores) < 10:

@@ -116,5 +116,26 @@ def delaunay_mesh(sites, rel_area_tol=1e-12):
     span = np.ptp(pts, axis=0)
     if np.any(np.abs(area) <= rel_area_tol * span[0] * span[1]):
         raise InputError("sites: the triangulation has a degenerate (zero-area) triangle")
+    # one order whatever Qhull's: each triangle starts at its smallest vertex (the cyclic,
+    # counter-clockwise order kept), triangles sorted; sites that moved by a rounding error
+    # (a world -> index round trip) then give the same mesh, not a permutation of it
+    t = np.take_along_axis(t, (np.argmin(t, axis=1)[:, None] + np.arange(3)) % 3, axis=1)
+    t = t[np.lexsort((t[:, 2], t[:, 1], t[:, 0]))]
+    return triangle_mesh(pts, t)
+
+
+def triangle_mesh(points, triangles):
+    """A :class:`TriangleMesh` (with its adjacency) from points and triangles made elsewhere,
+    e.g. read back from a file or a VTK pipeline.
+
+    Raises
+    ------
+    InputError
+        Triangles that index missing points, or an edge shared by more than two triangles.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if len(t) and (t.min() < 0 or t.max() >= len(pts)):
+        raise InputError(f"mesh: triangles refer to points outside 0..{len(pts) - 1}")
     pairs, shared, _ = edge_adjacency(t)
     return TriangleMesh(points=pts, triangles=t, adjacency=pairs, shared_edges=shared)

@@ -7,10 +7,17 @@ from .convert import (ImageGeometry, image_to_array, array_to_image, mesh_to_pol
 from .readers import read_image, SUPPORTED_INPUTS
 from .writers import write_mesh, write_polydata, read_polydata, MESH_FORMATS
 from .base import CTSegAlgorithm
+from .density import DensityMapFilter
+from .sites import CVTSitesFilter
+from .triangulation import DelaunayMeshFilter
+from .triangle_gray import TriangleGrayFilter
+from .graphcut import GraphCutSegmentFilter
+from .boundary import MaterialBoundaryFilter
 from .segment import CTSegmentFilter
 
 __all__ = ["ImageGeometry", "image_to_array", "array_to_image", "mesh_to_polydata",
            "boundary_to_polydata", "append_polydata", "segmentation_to_polydata",
            "polydata_to_arrays", "read_image", "SUPPORTED_INPUTS", "write_mesh",
            "write_polydata", "read_polydata", "MESH_FORMATS", "CTSegAlgorithm",
-           "CTSegmentFilter"]
+           "DensityMapFilter", "CVTSitesFilter", "DelaunayMeshFilter", "TriangleGrayFilter",
+           "GraphCutSegmentFilter", "MaterialBoundaryFilter", "CTSegmentFilter"]

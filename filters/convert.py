@@ -30,6 +30,31 @@ class ImageGeometry:
         ijk = np.asarray(ijk, float)
         return np.asarray(self.origin) + (ijk * np.asarray(self.spacing)) @ self.direction.T
 
+    def to_index(self, xyz):
+        """World coordinates -> (fractional) index coordinates (i, j, k)."""
+        xyz = np.asarray(xyz, float) - np.asarray(self.origin)
+        return np.linalg.solve(self.direction, xyz.T).T / np.asarray(self.spacing)
+
+    FIELD = "ctseg_geometry"
+
+    def attach(self, data, shape):
+        """Record the geometry and the (rows, cols) of the slice in ``data``'s field data, so
+        that a filter downstream (Delaunay on CVT sites) can work in index coordinates."""
+        values = np.concatenate([self.origin, self.spacing, self.direction.ravel(), shape])
+        arr = numpy_support.numpy_to_vtk(values.astype(np.float64), deep=True)
+        arr.SetName(self.FIELD)
+        data.GetFieldData().AddArray(arr)
+
+    @classmethod
+    def from_field_data(cls, data):
+        """(ImageGeometry, (rows, cols)) recorded by :meth:`attach`."""
+        arr = data.GetFieldData().GetArray(cls.FIELD)
+        if arr is None:
+            raise InputError("polydata: no image geometry recorded (the input must come "
+                             "from a ctseg filter such as CVTSitesFilter)")
+        v = numpy_support.vtk_to_numpy(arr)
+        return cls(v[0:3], v[3:6], v[6:15].reshape(3, 3)), (int(v[15]), int(v[16]))
+
 
 def image_to_array(image):
     """vtkImageData (one scalar component) -> (array, ImageGeometry).
@@ -125,13 +150,19 @@ def mesh_to_polydata(points, triangles, material, gray, geometry=None, slice_ind
 
 
 def boundary_to_polydata(points, lines, sides, geometry=None, slice_index=0, axis="z"):
-    """Boundary polylines (lists of vertex indices) of one slice -> vtkPolyData with lines.
-
-    Cell arrays ``material_a`` and ``material_b`` (the materials on each side) and ``slice``.
-    """
+    """Boundary polylines (lists of vertex indices) of one slice, in its pixel-index
+    coordinates -> vtkPolyData with lines in world coordinates (see
+    :func:`boundary_lines_to_polydata`)."""
     geometry = geometry or ImageGeometry()
+    return boundary_lines_to_polydata(_world_points(points, geometry, axis, slice_index), lines,
+                                      sides, np.full(len(lines), slice_index))
+
+
+def boundary_lines_to_polydata(xyz, lines, sides, line_slice=None):
+    """Polylines on world points -> vtkPolyData with cell arrays ``material_a`` and
+    ``material_b`` (the materials on each side) and ``slice``."""
     poly = vtkPolyData()
-    poly.SetPoints(_points(_world_points(points, geometry, axis, slice_index)))
+    poly.SetPoints(_points(xyz))
     ca = vtkCellArray()
     if lines:
         offsets = np.concatenate([[0], np.cumsum([len(l) for l in lines])]).astype(np.int64)
@@ -142,8 +173,27 @@ def boundary_to_polydata(points, lines, sides, geometry=None, slice_index=0, axi
     sides = np.asarray(sides, np.int32).reshape(-1, 2)
     _add_cell_array(poly, np.ascontiguousarray(sides[:, 0]), "material_a")
     _add_cell_array(poly, np.ascontiguousarray(sides[:, 1]), "material_b")
-    _add_cell_array(poly, np.full(len(sides), slice_index, np.int32), "slice")
+    line_slice = np.zeros(len(sides)) if line_slice is None else line_slice
+    _add_cell_array(poly, np.asarray(line_slice, np.int32), "slice")
     return poly
+
+
+def mesh_index_coordinates(xyz, geometry, shape, tol_px=1e-6):
+    """World points of a mesh over a one-slice image -> (x=col, y=row) index coordinates.
+
+    Raises
+    ------
+    InputError
+        Points off the slice's plane or outside its rectangle of pixel centres.
+    """
+    ijk = geometry.to_index(xyz)
+    rows, cols = shape
+    if len(ijk) and np.abs(ijk[:, 2]).max() > tol_px * max(rows, cols):
+        raise InputError("mesh: its points are not in the image's plane")
+    if len(ijk) and (ijk[:, 0].min() < -tol_px or ijk[:, 1].min() < -tol_px
+                     or ijk[:, 0].max() > cols - 1 + tol_px or ijk[:, 1].max() > rows - 1 + tol_px):
+        raise InputError("mesh: its points lie outside the image")
+    return np.clip(ijk[:, :2], 0, [cols - 1, rows - 1])
 
 
 def append_polydata(parts):
