@@ -1,4 +1,4 @@
-"""The ``ctseg`` command line: ``ctseg mesh INPUT -o OUTPUT.vtp``."""
+"""The ``ctseg`` command line: ``ctseg mesh INPUT -o OUTPUT``."""
 import argparse
 import json
 import os
@@ -11,17 +11,27 @@ from .errors import CTSegError, InputError
 from .pipeline import PIXELS_PER_SITE
 
 MESH_HELP = f"""\
-Segment a 2D CT slice into a triangle mesh with one material per triangle.
+Segment a CT slice or volume into a triangle mesh with one material per triangle.
 
 Pipeline (Yang et al. 2014): gradient density map -> Ward-initialised centroidal Voronoi
 tessellation -> Delaunay triangles -> area-weighted gray per triangle -> recursive graph
-cut -> materials numbered 0..K-1 by ascending mean gray.
+cut -> materials numbered 0..K-1 by ascending gray.
 
-Inputs: .npy, .png, .tif/.tiff, a single DICOM file. Output: VTK XML PolyData (.vtp) in
-world coordinates with cell arrays 'material' (int), 'gray' (input units) and 'slice'.
+Inputs: .npy, .png, .tif/.tiff (single or multi-page), DICOM (a file, or a folder of one
+series; --series picks one of several), .nrrd/.nhdr, .nii/.nii.gz, .mha/.mhd, .vti, or a
+folder of TIFF slices. A volume is segmented slice by slice along --axis with one
+material numbering for the whole volume; its slices run in --jobs local processes or on
+a Dask cluster (--dask ADDRESS).
 
-Defaults: the number of sites is one per {PIXELS_PER_SITE} pixels (2048 for 512 x 512);
-the split and merge thresholds are derived from the noise measured on the image.
+Outputs, by extension: .vtp (default; VTK XML PolyData, world coordinates, cell arrays
+'material', 'gray' in the input's units, 'slice'), .vtu, .ply (material as face colour
+and quality), .stl (one file per material: NAME_material<k>.stl), .obj (one group per
+material, colours in NAME.mtl). Every mesh passes pymeshlab's checks before it is written,
+and every file is written under a temporary name and renamed: an error or Ctrl-C leaves
+no partial file.
+
+Defaults: one per {PIXELS_PER_SITE} pixels of a slice for the sites (2048 for 512 x 512); the split
+and merge thresholds are derived from the noise measured on the image.
 """
 
 
@@ -32,7 +42,7 @@ def _progress_printer(enabled):
 
     def report(frac, stage):
         bar = "#" * int(round(frac * 30))
-        sys.stderr.write(f"\r[{bar:<30}] {frac * 100:5.1f}%  {stage:<14} {time.perf_counter() - t0:6.1f} s")
+        sys.stderr.write(f"\r[{bar:<30}] {frac * 100:5.1f}%  {stage:<16} {time.perf_counter() - t0:6.1f} s")
         if frac >= 1.0:
             sys.stderr.write("\n")
         sys.stderr.flush()
@@ -40,88 +50,128 @@ def _progress_printer(enabled):
     return report
 
 
+def _check_outputs(args):
+    """Refuse bad output paths before hours of work, not after."""
+    from ctseg.filters.writers import MESH_FORMATS, check_output_path
+
+    check_output_path(args.output, MESH_FORMATS)
+    for path, exts in ((args.boundary, (".vtp",)), (args.figure, (".png",)), (args.report, (".json",))):
+        if path:
+            check_output_path(path, exts)
+
+
 def _mesh(args):
-    from ctseg.filters import (boundary_to_polydata, mesh_to_polydata, read_image,
-                               write_polydata)
+    from ctseg.filters import read_image, segmentation_to_polydata, write_mesh, write_polydata
+    from ctseg.filters.figure import render_figure
 
-    from .figure import segmentation_figure
-    from .meshcheck import check_mesh
-    from .metrics import evaluate
+    from .metrics import evaluate, evaluate_volume
     from .pipeline import segment_image
+    from .volume import segment_volume, slice_axis, volume_slice
 
-    for out in [args.output, args.boundary]:
-        if out and os.path.splitext(out)[1].lower() != ".vtp":
-            raise InputError(f"{out}: unknown output format; ctseg writes .vtp (VTK XML PolyData)")
-    image, geom = read_image(args.input)
+    _check_outputs(args)
+    image, geom = read_image(args.input, series=args.series)
     image = np.asarray(image)
     if image.ndim == 3 and image.shape[0] == 1:
         image = image[0]
-    if image.ndim != 2:
-        raise InputError(f"{args.input}: shape {image.shape} is not a 2D slice; "
-                         "volumes are segmented slice by slice by the filter layer")
+    if image.ndim not in (2, 3):
+        raise InputError(f"{args.input}: shape {image.shape} is neither a slice nor a volume")
     show = sys.stderr.isatty() and not args.quiet
-    seg = segment_image(image, n_sites=args.sites, seed=args.seed, n_materials=args.materials,
-                        progress=_progress_printer(show))
-    report = check_mesh(seg.points, seg.triangles, what=args.output)
-    poly = mesh_to_polydata(seg.points, seg.triangles, seg.material, seg.gray, geom)
-    write_polydata(poly, args.output)
-    diag = dict(seg.diagnostics)
+    progress = _progress_printer(show)
+    common = dict(n_sites=args.sites, seed=args.seed, n_materials=args.materials)
+    if image.ndim == 2:
+        result = segment_image(image, progress=progress, **common)
+        fig_image, fig_seg, fig_name = image, result, os.path.basename(args.input)
+        diag = dict(result.diagnostics)
+    else:
+        ax = slice_axis(args.axis)
+        mid = image.shape[ax] // 2
+        result = segment_volume(image, axis=ax, n_jobs=args.jobs, client=args.dask,
+                                progress=progress, keep_maps=(mid,) if args.figure else (),
+                                **common)
+        fig_image, fig_seg = volume_slice(image, ax, mid), result.slices[mid]
+        fig_name = f"{os.path.basename(args.input.rstrip(os.sep))} slice {mid} ({args.axis})"
+        diag = dict(result.diagnostics)
+        diag["slices"] = [{"n_triangles": s.diagnostics["n_triangles"],
+                           "lloyd_iterations": s.diagnostics["lloyd_iterations"],
+                           "total_time_s": s.diagnostics["total_time_s"]} for s in result.slices]
+    mesh, boundary = segmentation_to_polydata(result, geom)
+    written, checks = write_mesh(mesh, args.output)
     diag["input"] = os.path.abspath(args.input)
-    diag["output"] = os.path.abspath(args.output)
-    diag["mesh_checks"] = report
+    diag["outputs"] = [os.path.abspath(w) for w in written]
+    diag["mesh_checks"] = checks
     if args.boundary:
-        lines, sides = seg.boundary_polylines()
-        write_polydata(boundary_to_polydata(seg.points, lines, sides, geom), args.boundary)
+        write_polydata(boundary, args.boundary)
         diag["boundary_output"] = os.path.abspath(args.boundary)
-        diag["boundary_polylines"] = len(lines)
+        diag["boundary_polylines"] = boundary.GetNumberOfLines()
     if args.truth:
         truth, _ = read_image(args.truth)
         truth = np.asarray(truth)
         if truth.shape != image.shape:
             raise InputError(f"{args.truth}: truth shape {truth.shape} differs from the image's {image.shape}")
-        diag["accuracy"] = evaluate(seg, truth.astype(np.int64))
+        truth = truth.astype(np.int64)
+        diag["accuracy"] = evaluate(result, truth) if image.ndim == 2 else evaluate_volume(result, truth)
     if args.figure:
-        segmentation_figure(args.figure, image, seg)
+        render_figure(args.figure, fig_image, fig_seg, title=fig_name)
         diag["figure"] = os.path.abspath(args.figure)
     if args.report:
-        with open(args.report, "w") as fh:
-            json.dump(diag, fh, indent=2)
+        from ctseg.filters.writers import atomic_outputs
+
+        with atomic_outputs([args.report]) as (tmp,):
+            with open(tmp, "w") as fh:
+                json.dump(diag, fh, indent=2)
     if not args.quiet:
-        t = diag["times_s"]
-        print(f"{args.input}: {image.shape[1]} x {image.shape[0]} px -> {diag['n_triangles']} "
-              f"triangles, {diag['n_sites']} vertices, {diag['n_materials']} materials "
-              f"(mean gray {', '.join(f'{g:.4g}' for g in diag['material_gray'])})")
-        print("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in t.items())
-              + f"; total {diag['total_time_s']:.2f} s; Lloyd iterations {diag['lloyd_iterations']}, "
-              f"graph cuts {diag['graphcut_calls']}")
-        print(f"mesh checks: {'passed' if report['ok'] else 'FAILED'}; wrote {args.output}"
-              + (f", {args.boundary}" if args.boundary else "")
-              + (f", {args.report}" if args.report else "")
-              + (f", {args.figure}" if args.figure else ""))
-        if "accuracy" in diag:
-            acc = diag["accuracy"]
-            print("Dice per material: " + ", ".join(f"{d:.4f}" for d in acc["dice"])
-                  + f" (min {acc['min_dice']:.4f}); boundary distance "
-                  f"{acc['boundary_px']['mean']:.3f} px")
+        _summary(args, image, diag, written)
     return 0
+
+
+def _summary(args, image, diag, written):
+    shape = " x ".join(str(n) for n in image.shape[::-1])
+    print(f"{args.input}: {shape} -> {diag['n_triangles']} triangles, "
+          f"{diag['n_materials']} materials (gray {', '.join(f'{g:.4g}' for g in diag['material_gray'])})")
+    if image.ndim == 2:
+        t = diag["times_s"]
+        print("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in t.items())
+              + f"; total {diag['total_time_s']:.2f} s; Lloyd iterations "
+              f"{diag['lloyd_iterations']}, graph cuts {diag['graphcut_calls']}")
+    else:
+        print(f"time: {diag['wall_time_s']:.2f} s for {diag['n_slices']} slices along "
+              f"{diag['axis']} ({diag['executor']}); summed over slices: "
+              + ", ".join(f"{k} {v:.2f} s" for k, v in diag["slice_times_s"].items()))
+    outs = written + [p for p in (args.boundary, args.report, args.figure) if p]
+    print(f"mesh checks: {'passed' if diag['mesh_checks']['ok'] else 'FAILED'}; wrote {', '.join(outs)}")
+    if "accuracy" in diag:
+        acc = diag["accuracy"]
+        print("Dice per material: " + ", ".join(f"{d:.4f}" for d in acc["dice"])
+              + f" (min {acc['min_dice']:.4f}); boundary distance "
+              f"{acc['boundary_px']['mean']:.3f} px")
 
 
 def build_parser():
     parser = argparse.ArgumentParser(prog="ctseg", description="Segmented triangle meshes from CT images.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(dest="command", required=True)
-    m = sub.add_parser("mesh", help="segment a 2D slice into a triangle mesh",
+    m = sub.add_parser("mesh", help="segment a slice or a volume into a triangle mesh",
                        description=MESH_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    m.add_argument("input", help="image file (.npy, .png, .tif, .tiff, DICOM)")
-    m.add_argument("-o", "--output", required=True, help="output mesh (.vtp)")
+    m.add_argument("input", help="image file or folder (see above)")
+    m.add_argument("-o", "--output", required=True,
+                   help="output mesh: .vtp, .vtu, .ply, .stl or .obj")
     m.add_argument("--boundary", help="also write the material boundary polylines (.vtp)")
     m.add_argument("--sites", type=int, default=None,
-                   help=f"number of CVT sites (default: pixels / {PIXELS_PER_SITE})")
+                   help=f"CVT sites per slice (default: pixels / {PIXELS_PER_SITE})")
     m.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     m.add_argument("--materials", type=int, default=None, metavar="K",
                    help="exact number of materials (default: found from the data)")
+    m.add_argument("--axis", default="z", choices=["z", "y", "x"],
+                   help="slice axis of a volume (default z)")
+    m.add_argument("--jobs", type=int, default=0, metavar="N",
+                   help="worker processes for a volume's slices (default 0: one per core; "
+                        "1: this process)")
+    m.add_argument("--dask", metavar="ADDRESS",
+                   help="run a volume's slices on this Dask scheduler (e.g. tcp://host:8786)")
+    m.add_argument("--series", metavar="UID",
+                   help="DICOM SeriesInstanceUID, for a folder holding several series")
     m.add_argument("--report", help="write all diagnostics as JSON")
-    m.add_argument("--figure", help="write the six-panel figure (PNG)")
+    m.add_argument("--figure", help="write the six-panel figure (PNG; a volume's middle slice)")
     m.add_argument("--truth", help="ground-truth labels (same shape) to report Dice against")
     m.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     return parser

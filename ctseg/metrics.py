@@ -81,3 +81,24 @@ def evaluate(seg, truth, supersample_truth=None, supersample=1):
     return {"dice": [float(d) for d in dice], "min_dice": float(np.nanmin(dice)),
             "n_materials_found": int(seg.n_materials), "n_materials_true": int(np.max(truth)) + 1,
             "boundary_px": bd}
+
+
+def evaluate_volume(vseg, truth):
+    """Dice per material over a whole volume, and the boundary distance averaged over the
+    slices that have a true boundary, of a :class:`ctseg.volume.VolumeSegmentation`."""
+    from .volume import volume_labels, volume_slice
+
+    truth = np.asarray(truth, np.int64)
+    pred = volume_labels(vseg, truth.shape)
+    n = int(max(pred.max(), truth.max())) + 1
+    dice = dice_per_label(pred, truth, n)
+    dist = []
+    for k, seg in enumerate(vseg.slices):
+        t = volume_slice(truth, vseg.axis, k)
+        if len(np.unique(t)) > 1:
+            dist.append(boundary_distance(seg.points, seg.boundary_edges, t))
+    mean = {key: float(np.mean([d[key] for d in dist])) if dist else 0.0
+            for key in ("mesh_to_truth", "truth_to_mesh", "mean")}
+    return {"dice": [float(d) for d in dice], "min_dice": float(np.nanmin(dice)),
+            "n_materials_found": int(vseg.n_materials), "n_materials_true": int(truth.max()) + 1,
+            "boundary_px": mean, "slices_with_boundaries": len(dist)}

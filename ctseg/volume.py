@@ -79,11 +79,12 @@ class VolumeSegmentation:
         return len(self.material_gray)
 
 
-def _segment_slice(image, params):
-    """Worker: one slice, the per-pixel maps dropped (they are as large as the slice)."""
+def _segment_slice(image, params, keep_maps=False):
+    """Worker: one slice; the per-pixel maps (as large as the slice) dropped unless asked."""
     seg = segment_image(image, **params)
-    seg.density = None
-    seg.cvt_labels = None
+    if not keep_maps:
+        seg.density = None
+        seg.cvt_labels = None
     return seg
 
 
@@ -117,7 +118,7 @@ def _run_local(tasks, n_jobs, on_done):
     method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
     with ProcessPoolExecutor(max_workers=n_jobs,
                              mp_context=multiprocessing.get_context(method)) as pool:
-        futures = {pool.submit(_segment_slice, img, params): k for k, (img, params) in enumerate(tasks)}
+        futures = {pool.submit(_segment_slice, *task): k for k, task in enumerate(tasks)}
         try:
             for fut in as_completed(futures):
                 k = futures[fut]
@@ -131,14 +132,20 @@ def _run_local(tasks, n_jobs, on_done):
 
 
 def _run_dask(tasks, client, on_done):
-    from distributed import Client, as_completed
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise ParameterError("client: Dask is not installed; pip install 'ctseg[dask]' "
+                             "(or distributed)") from None
 
     own = isinstance(client, str)
     if own:
-        client = Client(client)
+        try:
+            client = Client(client, timeout=30)
+        except (OSError, TimeoutError) as exc:
+            raise ParameterError(f"client: cannot reach the Dask scheduler at {client} ({exc})") from None
     try:
-        futures = client.map(_segment_slice, [t[0] for t in tasks], [t[1] for t in tasks],
-                             pure=False)
+        futures = client.map(_segment_slice, *zip(*tasks), pure=False)
         index = {f.key: k for k, f in enumerate(futures)}
         results = [None] * len(tasks)
         try:
@@ -163,7 +170,7 @@ def _slice_result(get, k):
 
 
 def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=None,
-                   progress=None, **params):
+                   progress=None, keep_maps=(), **params):
     """Segment a 3D volume slice by slice into triangle meshes with one numbering of the
     materials for the whole volume.
 
@@ -191,6 +198,8 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
         on that cluster and ``n_jobs`` is ignored.
     progress : callable, optional
         ``progress(fraction_done, message)`` after each slice.
+    keep_maps : iterable of int
+        Slices whose density and CVT maps are kept (for a figure); the others drop them.
     **params
         Any keyword of :func:`ctseg.segment_image` (``n_materials``, ``lam``, ...).
 
@@ -231,7 +240,9 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
     slice_params.pop("n_materials", None)  # fixed by the levels
     t_levels = time.perf_counter() - t_start
 
-    tasks = [(np.ascontiguousarray(volume_slice(vol, ax, k)), slice_params) for k in range(n_slices)]
+    keep = {int(k) for k in keep_maps}
+    tasks = [(np.ascontiguousarray(volume_slice(vol, ax, k)), slice_params, k in keep)
+             for k in range(n_slices)]
     done = [0]
 
     def on_done(k):
@@ -247,8 +258,8 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
     else:
         executor = "serial"
         slices = []
-        for k, (img, prm) in enumerate(tasks):
-            slices.append(_slice_result(lambda: _segment_slice(img, prm), k))
+        for k, task in enumerate(tasks):
+            slices.append(_slice_result(lambda: _segment_slice(*task), k))
             on_done(k)
     factor = scale[1]
     mat_gray = levels / factor + scale[0] if factor else np.full(len(levels), scale[0])

@@ -34,7 +34,7 @@ def material_colors(material):
     return PALETTE[np.asarray(material, np.int64) % len(PALETTE)]
 
 
-def _target(path, ext_expected=None):
+def check_output_path(path, ext_expected=None):
     path = os.fspath(path)
     if os.path.isdir(path):
         raise InputError(f"{path}: is a folder; give a file name")
@@ -51,7 +51,7 @@ def _target(path, ext_expected=None):
 
 
 @contextlib.contextmanager
-def _atomic(paths):
+def atomic_outputs(paths):
     """Yield temporary names beside ``paths``; rename them all onto ``paths`` on success,
     delete them on any failure."""
     temps = []
@@ -149,6 +149,9 @@ def write_mesh(poly, path, check=True):
     -------
     written : list of str
         The files written.
+    checks : dict
+        The mesh checks' report (:func:`ctseg.meshcheck.mesh_check_report`; empty when
+        ``check`` is off).
 
     Raises
     ------
@@ -159,14 +162,17 @@ def write_mesh(poly, path, check=True):
     """
     from ctseg.meshcheck import check_mesh
 
-    path, ext = _target(path, MESH_FORMATS)
+    path, ext = check_output_path(path, MESH_FORMATS)
     points, triangles, arrays = polydata_to_arrays(poly)
-    if check:
-        check_mesh(points, triangles, what=path)
+    checks = check_mesh(points, triangles, what=path) if check else {}
+    return _write(poly, path, ext, points, triangles, arrays), checks
+
+
+def _write(poly, path, ext, points, triangles, arrays):
     if ext == ".vtp":
         from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
 
-        with _atomic([path]) as (tmp,):
+        with atomic_outputs([path]) as (tmp,):
             _vtk_write(vtkXMLPolyDataWriter(), poly, tmp, path)
         return [path]
     if ext == ".vtu":
@@ -176,26 +182,26 @@ def write_mesh(poly, path, check=True):
         grid = vtkAppendFilter()
         grid.AddInputData(poly)
         grid.Update()
-        with _atomic([path]) as (tmp,):
+        with atomic_outputs([path]) as (tmp,):
             _vtk_write(vtkXMLUnstructuredGridWriter(), grid.GetOutput(), tmp, path)
         return [path]
     if "material" not in arrays:
         raise InputError(f"{path}: the mesh has no 'material' cell array to write")
     material = np.asarray(arrays["material"], np.int64)
     if ext == ".ply":
-        with _atomic([path]) as (tmp,):
+        with atomic_outputs([path]) as (tmp,):
             _write_ply(points, triangles, material, tmp)
         return [path]
     if ext == ".stl":
         pattern = mesh_outputs(path)[0]
         mats = np.unique(material)
         outs = [pattern.format(material=k) for k in mats]
-        with _atomic(outs) as temps:
+        with atomic_outputs(outs) as temps:
             for k, tmp in zip(mats, temps):
                 _write_stl(points, triangles[material == k], tmp)
         return outs
     obj, mtl = mesh_outputs(path)
-    with _atomic([obj, mtl]) as (tmp_obj, tmp_mtl):
+    with atomic_outputs([obj, mtl]) as (tmp_obj, tmp_mtl):
         _write_obj(points, triangles, material, tmp_obj, tmp_mtl, os.path.basename(mtl))
     return [obj, mtl]
 
@@ -205,8 +211,8 @@ def write_polydata(poly, path):
     temporary name renamed at the end. No mesh checks: use :func:`write_mesh` for meshes."""
     from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
 
-    path, _ = _target(path, (".vtp",))
-    with _atomic([path]) as (tmp,):
+    path, _ = check_output_path(path, (".vtp",))
+    with atomic_outputs([path]) as (tmp,):
         _vtk_write(vtkXMLPolyDataWriter(), poly, tmp, path)
     return path
 

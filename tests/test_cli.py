@@ -1,4 +1,5 @@
 import json
+import os
 import subprocess
 import sys
 
@@ -50,7 +51,9 @@ def test_materials_option(slice_files):
 
 @pytest.mark.parametrize("args,message", [
     (["missing.npy", "-o", "m.vtp"], "no such file"),
-    (["slice.npy", "-o", "m.stl"], "unknown output format"),
+    (["slice.npy", "-o", "m.abc"], "unknown output format"),
+    (["slice.npy", "-o", "m.vtp", "--figure", "f.jpg"], "unknown output format"),
+    (["slice.npy", "-o", "m.vtp", "--materials", "0"], "n_materials"),
     (["slice.npy", "-o", "m.vtp", "--sites", "2"], "n_sites"),
     (["slice.npy", "-o", "m.vtp", "--sites", "99999"], "n_sites"),
     (["slice.npy", "-o", "nowhere/m.vtp"], "does not exist"),
@@ -67,3 +70,53 @@ def test_errors_are_one_line_and_exit_2(slice_files, capsys, monkeypatch, args, 
 def test_console_script_help():
     out = subprocess.run([sys.executable, "-m", "ctseg.cli", "mesh", "--help"], capture_output=True, text=True)
     assert out.returncode == 0 and "one per 128 pixels" in out.stdout
+
+
+def test_volume_from_nrrd_to_ply_with_figure_and_truth(tmp_path, capsys):
+    """A volume file through the command: every slice meshed, one numbering, the figure of
+    the middle slice, Dice over the volume; two worker processes."""
+    import nrrd
+    import pymeshlab
+
+    from ctseg.phantoms import make_volume
+
+    p = make_volume(5, 96, seed=2)
+    nrrd.write(str(tmp_path / "v.nrrd"), p.image, {"spacings": [0.1, 0.1, 0.3]}, index_order="C")
+    np.save(tmp_path / "t.npy", p.truth)
+    rc = main(["mesh", str(tmp_path / "v.nrrd"), "-o", str(tmp_path / "v.ply"), "--sites", "350",
+               "--jobs", "2", "--figure", str(tmp_path / "f.png"), "--truth", str(tmp_path / "t.npy"),
+               "--report", str(tmp_path / "r.json")])
+    assert rc == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["n_slices"] == 5 and report["executor"] == "2 processes"
+    dice = report["accuracy"]["dice"]
+    assert report["n_materials"] == 4 and min(dice[0], dice[2], dice[3]) > 0.9 and dice[1] > 0.7
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(tmp_path / "v.ply"))
+    assert ms.current_mesh().face_number() == report["n_triangles"] == report["mesh_checks"]["faces"]
+    # z of the vertices: the slice positions, 0.3 mm apart
+    z = np.unique(np.round(ms.current_mesh().vertex_matrix()[:, 2], 9))
+    np.testing.assert_allclose(z, 0.3 * np.arange(5))
+    assert (tmp_path / "f.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "slices along z" in capsys.readouterr().out
+
+
+def test_interrupt_leaves_no_partial_output(tmp_path, monkeypatch, capsys):
+    import ctseg.volume
+
+    calls = []
+
+    def interrupted(image, params, keep_maps=False):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(image, params, keep_maps)
+
+    real = ctseg.volume._segment_slice
+    monkeypatch.setattr(ctseg.volume, "_segment_slice", interrupted)
+    vol = np.random.default_rng(0).random((4, 16, 16))
+    np.save(tmp_path / "v.npy", vol)
+    rc = main(["mesh", str(tmp_path / "v.npy"), "-o", str(tmp_path / "m.vtp"), "--jobs", "1",
+               "--report", str(tmp_path / "r.json")])
+    assert rc == 130 and "interrupted" in capsys.readouterr().err
+    assert os.listdir(tmp_path) == ["v.npy"]

@@ -267,7 +267,9 @@ def test_vtp_and_vtu_round_trip_with_geometry(tmp_path):
     from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
 
     poly, geom, pts, tri = _two_slice_mesh()
-    assert write_mesh(poly, tmp_path / "m.vtp") == [str(tmp_path / "m.vtp")]
+    written, checks = write_mesh(poly, tmp_path / "m.vtp")
+    assert written == [str(tmp_path / "m.vtp")]
+    assert checks["ok"] and checks["faces"] == 8 and checks["non_manifold_edges"] == 0
     p, t, arrays = polydata_to_arrays(read_polydata(tmp_path / "m.vtp"))
     ijk = np.column_stack([np.tile(pts, (2, 1)), np.repeat([0.0, 1.0], len(pts))])
     np.testing.assert_allclose(p, geom.to_world(ijk))
@@ -315,7 +317,7 @@ def test_ply_has_material_as_face_colour_and_quality(tmp_path):
 
 def test_stl_one_file_per_material(tmp_path):
     poly, _, _, _ = _two_slice_mesh()
-    written = write_mesh(poly, tmp_path / "m.stl")
+    written, _ = write_mesh(poly, tmp_path / "m.stl")
     assert [os.path.basename(w) for w in written] == [f"m_material{k}.stl" for k in range(3)]
     assert not (tmp_path / "m.stl").exists()
     p, t, arrays = polydata_to_arrays(poly)
@@ -330,7 +332,7 @@ def test_stl_one_file_per_material(tmp_path):
 
 def test_obj_one_group_per_material(tmp_path):
     poly, _, _, _ = _two_slice_mesh()
-    written = write_mesh(poly, tmp_path / "m.obj")
+    written, _ = write_mesh(poly, tmp_path / "m.obj")
     assert [os.path.basename(w) for w in written] == ["m.obj", "m.mtl"]
     m = _Loaded(tmp_path / "m.obj")
     p, t, arrays = polydata_to_arrays(poly)
