@@ -52,12 +52,15 @@ def _progress_printer(enabled):
 
 def _check_outputs(args):
     """Refuse bad output paths before hours of work, not after."""
+    from ctseg.filters.figure import offscreen_window
     from ctseg.filters.writers import MESH_FORMATS, check_output_path
 
     check_output_path(args.output, MESH_FORMATS)
     for path, exts in ((args.boundary, (".vtp",)), (args.figure, (".png",)), (args.report, (".json",))):
         if path:
             check_output_path(path, exts)
+    if args.figure:
+        offscreen_window()  # can this VTK draw here at all?
 
 
 def _mesh(args):

@@ -112,6 +112,24 @@ def _edges(triangles):
     return np.unique(np.sort(e, axis=1), axis=0)
 
 
+def offscreen_window():
+    """A render window that can draw without a screen, or InputError saying why not.
+
+    VTK >= 9.4 wheels fall back on EGL or OSMesa when there is no X display; older builds
+    (Debian's VTK 9.2 in ParaView 5.11) only have X, and abort the whole process when asked
+    to render without one, so that case is refused here instead.
+    """
+    import vtkmodules.vtkRenderingOpenGL2  # noqa: F401 - the render window implementation
+    from vtkmodules.vtkRenderingCore import vtkRenderWindow
+
+    window = vtkRenderWindow()
+    if window.GetClassName() == "vtkXOpenGLRenderWindow" and not os.environ.get("DISPLAY"):
+        raise InputError("figure: this VTK renders through X only and there is no display; "
+                         "run under xvfb-run, or use VTK >= 9.4 (offscreen EGL/OSMesa)")
+    window.SetOffScreenRendering(1)
+    return window
+
+
 def render_figure(path, image, seg, title=None):
     """Render the six panels of the paper's Fig. 5 for one slice and write them as PNG.
 
@@ -137,10 +155,8 @@ def render_figure(path, image, seg, title=None):
         Not a .png path, or a segmentation without its per-pixel maps.
     """
     from vtkmodules.vtkIOImage import vtkPNGWriter
-    from vtkmodules.vtkRenderingCore import (vtkRenderer, vtkRenderWindow, vtkTextActor,
-                                             vtkWindowToImageFilter)
+    from vtkmodules.vtkRenderingCore import vtkRenderer, vtkTextActor, vtkWindowToImageFilter
     import vtkmodules.vtkRenderingFreeType  # noqa: F401 - text rendering
-    import vtkmodules.vtkRenderingOpenGL2  # noqa: F401 - the render window implementation
 
     path, _ = check_output_path(path, (".png",))
     img = np.asarray(image, float)
@@ -172,8 +188,7 @@ def render_figure(path, image, seg, title=None):
     scale = PANEL_PX / max(rows, cols)
     pw, ph = int(round(cols * scale)), int(round(rows * scale))
     width, height = 3 * pw, 2 * (ph + TITLE_PX)
-    window = vtkRenderWindow()
-    window.SetOffScreenRendering(1)
+    window = offscreen_window()
     window.SetSize(width, height)
     window.SetMultiSamples(0)
     for k, (label, actors) in enumerate(panels):

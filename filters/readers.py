@@ -4,8 +4,9 @@ Every reader returns ``(array, ImageGeometry)``: a (rows, cols) slice or an (nz,
 volume in VTK's index order (array[k, j, i] is VTK point (i, j, k)) and the index-to-world
 map of the file. Which library reads what, and why:
 
-- VTK: PNG, MetaImage (.mha/.mhd, direction matrix included), VTK XML image (.vti),
-  NIfTI (.nii/.nii.gz; its sform or qform becomes the direction and origin).
+- VTK: PNG, VTK XML image (.vti), NIfTI (.nii/.nii.gz; its sform or qform becomes the
+  direction and origin), MetaImage voxels (.mha/.mhd; the geometry is read from the
+  header here, see :func:`_read_metaimage`).
 - pydicom: DICOM files and series. vtkDICOMImageReader mixes the files of several series
   found in one folder and ignores the image orientation (tilted or sagittal stacks come
   out with wrong world coordinates); pydicom lets us group by series and place every slice
@@ -340,10 +341,18 @@ _MET_BYTES = {"MET_CHAR": 1, "MET_UCHAR": 1, "MET_SHORT": 2, "MET_USHORT": 2, "M
               "MET_ULONG_LONG": 8, "MET_FLOAT": 4, "MET_DOUBLE": 8}
 
 
-def _check_metaimage(path):
-    """Check that a MetaImage's data are all there before VTK reads it: vtkMetaImageReader
-    fills a truncated file's missing voxels with zeros without a word."""
+def _read_metaimage(path):
+    """MetaImage: voxels by VTK, geometry from the header by MetaIO's own convention.
+
+    ``TransformMatrix`` lists the direction of each index axis in turn (ITK's reading, the
+    reference implementation); vtkMetaImageReader 9.7 reads it transposed (a rotated file
+    written by SimpleITK came back rotated the other way) and VTK 9.2 ignores it, so the
+    header is parsed here. The header is also checked against the data size first:
+    vtkMetaImageReader fills a truncated file's missing voxels with zeros without a word.
+    """
     import zlib
+
+    from vtkmodules.vtkIOImage import vtkMetaImageReader
 
     with open(path, "rb") as fh:
         raw = fh.read()
@@ -360,29 +369,50 @@ def _check_metaimage(path):
         dims = [int(v) for v in fields["DimSize"].split()]
         elem = _MET_BYTES[fields["ElementType"]] * int(fields.get("ElementNumberOfChannels", 1))
         source = fields["ElementDataFile"]
+        n = len(dims)
+
+        def numbers(keys, default):
+            for k in keys:
+                if k in fields:
+                    return [float(v) for v in fields[k].split()]
+            return default
+
+        offset = numbers(("Offset", "Position", "Origin"), [0.0] * n)[:n]
+        spacing = numbers(("ElementSpacing", "ElementSize"), [1.0] * n)[:n]
+        matrix = numbers(("TransformMatrix", "Rotation", "Orientation"), list(np.eye(n).ravel()))
+        axes = np.array(matrix[:n * n]).reshape(n, n)  # row a: the direction of index axis a
     except (KeyError, ValueError):
         raise InputError(f"{path}: not a readable MetaImage file (DimSize, ElementType or "
-                         "ElementDataFile missing)") from None
+                         "ElementDataFile missing or malformed)") from None
     if source == "LOCAL":
         data = raw[pos:]
     elif source.startswith("LIST") or "%" in source:
-        return  # slices in several files: VTK checks those
+        data = None  # slices in several files: VTK checks those
     else:
         data_path = os.path.join(os.path.dirname(path), source)
         if not os.path.isfile(data_path):
             raise InputError(f"{path}: its data file {data_path} does not exist")
         with open(data_path, "rb") as fh:
             data = fh.read()
-    need = int(np.prod(dims)) * elem
-    if fields.get("CompressedData", "False").lower() == "true":
-        try:
-            have = len(zlib.decompressobj().decompress(data))
-        except zlib.error as exc:
-            raise InputError(f"{path}: corrupt MetaImage data ({exc})") from None
-    else:
-        have = len(data)
-    if have < need:
-        raise InputError(f"{path}: truncated MetaImage data ({have} of {need} bytes)")
+    if data is not None:
+        need = int(np.prod(dims)) * elem
+        if fields.get("CompressedData", "False").lower() == "true":
+            try:
+                have = len(zlib.decompressobj().decompress(data))
+            except zlib.error as exc:
+                raise InputError(f"{path}: corrupt MetaImage data ({exc})") from None
+        else:
+            have = len(data)
+        if have < need:
+            raise InputError(f"{path}: truncated MetaImage data ({have} of {need} bytes)")
+    arr, _ = _read_vtk_image(vtkMetaImageReader, path, "MetaImage")
+    direction = np.eye(3)
+    direction[:n, :n] = axes.T
+    if n == 2:
+        direction[:, 2] = np.cross(direction[:, 0], direction[:, 1])
+    geom = ImageGeometry(np.pad(offset, (0, 3 - n)), np.pad(spacing, (0, 3 - n), constant_values=1.0),
+                         direction)
+    return arr, geom
 
 
 def _read_vtk_image(reader_cls, path, what):
@@ -454,10 +484,7 @@ def read_image(path, series=None):
     if ext in (".nii", ".nii.gz"):
         return _read_nifti(path)
     if ext in (".mha", ".mhd"):
-        from vtkmodules.vtkIOImage import vtkMetaImageReader
-
-        _check_metaimage(path)
-        return _read_vtk_image(vtkMetaImageReader, path, "MetaImage")
+        return _read_metaimage(path)
     if ext == ".vti":
         from vtkmodules.vtkIOXML import vtkXMLImageDataReader
 

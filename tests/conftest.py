@@ -24,3 +24,18 @@ def disc_image(size=48, noise=0.0, seed=0):
     rng = np.random.default_rng(seed)
     img = 20.0 + 180.0 * truth + noise * rng.standard_normal(truth.shape)
     return img, truth
+
+
+def _can_render():
+    from ctseg.errors import InputError
+    from ctseg.filters.figure import offscreen_window
+
+    try:
+        offscreen_window()
+    except InputError:
+        return False
+    return True
+
+
+# VTK >= 9.4 renders offscreen anywhere (EGL/OSMesa); VTK 9.2 needs a display
+requires_rendering = pytest.mark.skipif(not _can_render(), reason="this VTK needs a display to render")

@@ -10,7 +10,7 @@ from ctseg.cli import main
 from ctseg.filters import polydata_to_arrays, read_polydata
 from ctseg.meshcheck import mesh_check_report
 
-from conftest import disc_image
+from conftest import disc_image, requires_rendering
 
 
 @pytest.fixture()
@@ -24,7 +24,7 @@ def slice_files(tmp_path):
 def test_mesh_command_writes_everything(slice_files, capsys):
     d = slice_files
     rc = main(["mesh", str(d / "slice.npy"), "-o", str(d / "m.vtp"), "--boundary", str(d / "b.vtp"),
-               "--report", str(d / "r.json"), "--figure", str(d / "f.png"), "--truth",
+               "--report", str(d / "r.json"), "--truth",
                str(d / "truth.npy"), "--sites", "150"])
     assert rc == 0
     out = capsys.readouterr().out
@@ -39,7 +39,6 @@ def test_mesh_command_writes_everything(slice_files, capsys):
     assert report["n_sites"] == 150 and len(tri) == report["n_triangles"]
     b = read_polydata(d / "b.vtp")
     assert b.GetNumberOfLines() > 0 and b.GetCellData().GetArray("material_a") is not None
-    assert (d / "f.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_materials_option(slice_files):
@@ -72,9 +71,9 @@ def test_console_script_help():
     assert out.returncode == 0 and "one per 128 pixels" in out.stdout
 
 
-def test_volume_from_nrrd_to_ply_with_figure_and_truth(tmp_path, capsys):
-    """A volume file through the command: every slice meshed, one numbering, the figure of
-    the middle slice, Dice over the volume; two worker processes."""
+def test_volume_from_nrrd_to_ply_with_truth(tmp_path, capsys):
+    """A volume file through the command: every slice meshed, one numbering, Dice over the
+    volume; two worker processes."""
     import nrrd
     import pymeshlab
 
@@ -84,7 +83,7 @@ def test_volume_from_nrrd_to_ply_with_figure_and_truth(tmp_path, capsys):
     nrrd.write(str(tmp_path / "v.nrrd"), p.image, {"spacings": [0.1, 0.1, 0.3]}, index_order="C")
     np.save(tmp_path / "t.npy", p.truth)
     rc = main(["mesh", str(tmp_path / "v.nrrd"), "-o", str(tmp_path / "v.ply"), "--sites", "350",
-               "--jobs", "2", "--figure", str(tmp_path / "f.png"), "--truth", str(tmp_path / "t.npy"),
+               "--jobs", "2", "--truth", str(tmp_path / "t.npy"),
                "--report", str(tmp_path / "r.json")])
     assert rc == 0
     report = json.loads((tmp_path / "r.json").read_text())
@@ -97,7 +96,6 @@ def test_volume_from_nrrd_to_ply_with_figure_and_truth(tmp_path, capsys):
     # z of the vertices: the slice positions, 0.3 mm apart
     z = np.unique(np.round(ms.current_mesh().vertex_matrix()[:, 2], 9))
     np.testing.assert_allclose(z, 0.3 * np.arange(5))
-    assert (tmp_path / "f.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "slices along z" in capsys.readouterr().out
 
 
@@ -120,3 +118,20 @@ def test_interrupt_leaves_no_partial_output(tmp_path, monkeypatch, capsys):
                "--report", str(tmp_path / "r.json")])
     assert rc == 130 and "interrupted" in capsys.readouterr().err
     assert os.listdir(tmp_path) == ["v.npy"]
+
+
+@requires_rendering
+def test_figure_of_a_slice_and_of_a_volume(slice_files):
+    """The six panels, rendered offscreen; a volume's figure shows its middle slice."""
+    from ctseg.filters.readers import read_image
+
+    d = slice_files
+    assert main(["mesh", str(d / "slice.npy"), "-o", str(d / "m.vtp"), "--sites", "150",
+                 "--figure", str(d / "f.png"), "-q"]) == 0
+    fig, _ = read_image(d / "f.png")
+    vol = np.stack([np.load(d / "slice.npy")] * 3)
+    np.save(d / "v.npy", vol)
+    assert main(["mesh", str(d / "v.npy"), "-o", str(d / "v.vtp"), "--sites", "150", "--jobs", "1",
+                 "--figure", str(d / "fv.png"), "-q"]) == 0
+    figv, _ = read_image(d / "fv.png")
+    assert fig.shape == figv.shape and fig.shape[1] > fig.shape[0] > 300

@@ -194,15 +194,39 @@ def test_nifti_round_trip_with_qform(tmp_path):
     np.testing.assert_allclose(geom.to_world([2, 1, 1]), [10.0 - 0.6, -4.0 + 1.0, 2.0], atol=1e-5)
 
 
-@pytest.mark.parametrize("ext", [".mha", ".vti"])
+@pytest.mark.parametrize("compressed", [False, True])
+def test_metaimage_geometry_as_itk_reads_it(tmp_path, compressed):
+    """TransformMatrix lists each index axis's direction in turn: SimpleITK wrote this
+    header for direction [[0, -1, 0], [1, 0, 0], [0, 0, 1]] and put index (1, 0, 0) at
+    (1, 2.5, 3)."""
+    import zlib
+
+    vol = _volume((2, 3, 4))
+    body = vol.astype("<i2").tobytes()
+    body = zlib.compress(body) if compressed else body
+    head = ("ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
+            f"CompressedData = {compressed}\n"
+            + (f"CompressedDataSize = {len(body)}\n" if compressed else "")
+            + "TransformMatrix = 0 1 0 -1 0 0 0 0 1\nOffset = 1 2 3\n"
+            "ElementSpacing = 0.5 0.6 2\nDimSize = 4 3 2\nElementType = MET_SHORT\n"
+            "ElementDataFile = LOCAL\n").encode()
+    (tmp_path / "v.mha").write_bytes(head + body)
+    arr, geom = read_image(tmp_path / "v.mha")
+    assert np.array_equal(arr, vol)
+    np.testing.assert_allclose(geom.to_world([1, 0, 0]), [1.0, 2.5, 3.0])
+    np.testing.assert_allclose(geom.to_world([0, 1, 1]), [1.0 - 0.6, 2.0, 5.0])
+    (tmp_path / "cut.mha").write_bytes(head + body[: len(body) // 2])
+    with pytest.raises(InputError, match="cut.mha"):
+        read_image(tmp_path / "cut.mha")
+
+
+@pytest.mark.parametrize("ext", [".vti"])
 def test_vtk_formats_round_trip_with_direction(tmp_path, ext):
-    from vtkmodules.vtkIOImage import vtkMetaImageWriter
     from vtkmodules.vtkIOXML import vtkXMLImageDataWriter
 
     vol = _volume()
     geom = ImageGeometry(origin=(1, 2, 3), spacing=(0.5, 0.6, 2.0), direction=ROT)
-    writer = vtkMetaImageWriter if ext == ".mha" else vtkXMLImageDataWriter
-    _vtk_write(writer, tmp_path / f"v{ext}", array_to_image(vol, geom))
+    _vtk_write(vtkXMLImageDataWriter, tmp_path / f"v{ext}", array_to_image(vol, geom))
     arr, back = read_image(tmp_path / f"v{ext}")
     assert np.array_equal(arr, vol)
     np.testing.assert_allclose(back.to_world([[1, 2, 3], [0, 0, 0]]),
