@@ -119,11 +119,24 @@ def offscreen_window():
     (Debian's VTK 9.2 in ParaView 5.11) only have X, and abort the whole process when asked
     to render without one, so that case is refused here instead.
     """
+    import ctypes.util
+
     import vtkmodules.vtkRenderingOpenGL2  # noqa: F401 - the render window implementation
     from vtkmodules.vtkRenderingCore import vtkRenderWindow
 
+    headless = not os.environ.get("DISPLAY")
+    if headless and "VTK_DEFAULT_OPENGL_WINDOW" not in os.environ:
+        # pick the backend ourselves: VTK would try X first (and warn), and with neither
+        # EGL nor OSMesa present it crashes the process instead of failing
+        for lib, backend in (("EGL", "vtkEGLRenderWindow"), ("OSMesa", "vtkOSOpenGLRenderWindow")):
+            if ctypes.util.find_library(lib):
+                os.environ["VTK_DEFAULT_OPENGL_WINDOW"] = backend
+                break
+        else:
+            raise InputError("figure: no display and neither EGL nor OSMesa is installed; "
+                             "install libegl1 (Debian/Ubuntu) or run under xvfb-run")
     window = vtkRenderWindow()
-    if window.GetClassName() == "vtkXOpenGLRenderWindow" and not os.environ.get("DISPLAY"):
+    if window.GetClassName() == "vtkXOpenGLRenderWindow" and headless:
         raise InputError("figure: this VTK renders through X only and there is no display; "
                          "run under xvfb-run, or use VTK >= 9.4 (offscreen EGL/OSMesa)")
     window.SetOffScreenRendering(1)
