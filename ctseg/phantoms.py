@@ -37,6 +37,18 @@ class Phantom:
     pixel_mm: float
 
 
+def _label_of(name, materials):
+    """Label of material ``name`` among ``materials``, or of the closest present one in
+    attenuation order (the denser one first) when it is absent."""
+    order = list(MATERIALS)
+    i = order.index(name)
+    for d in range(len(order)):
+        for j in (i + d, i - d):
+            if 0 <= j < len(order) and order[j] in materials:
+                return list(materials).index(order[j])
+    return 0
+
+
 def _disc(x, y, cx, cy, r):
     return (x - cx) ** 2 + (y - cy) ** 2 <= r * r
 
@@ -61,19 +73,9 @@ def part_labels(size, seed=0, supersample=4, materials=MATERIALS, porosity=True)
     coords = (np.arange(n) + 0.5) / supersample - 0.5
     x, y = np.meshgrid(coords, coords)
     lab = np.zeros((n, n), np.uint8)
-    name_to_label = {m: k for k, m in enumerate(materials)}
 
     def code(name):
-        if name in name_to_label:
-            return name_to_label[name]
-        order = list(MATERIALS)
-        i = order.index(name)
-        # closest present material in attenuation order (prefer the denser one)
-        for d in range(1, len(order)):
-            for j in (i + d, i - d):
-                if 0 <= j < len(order) and order[j] in name_to_label:
-                    return name_to_label[order[j]]
-        return 0
+        return _label_of(name, materials)
 
     S = float(size)
     cx, cy = S / 2 + rng.uniform(-0.03, 0.03) * S, S / 2 + rng.uniform(-0.03, 0.03) * S
@@ -252,16 +254,9 @@ def volume_labels_hr(n_slices, size, seed=0, supersample=2, materials=MATERIALS)
     n = size * supersample
     coords = (np.arange(n) + 0.5) / supersample - 0.5
     x, y = np.meshgrid(coords, coords)
-    name_to_label = {m: k for k, m in enumerate(materials)}
 
     def code(name):
-        order = list(MATERIALS)
-        i = order.index(name)
-        for d in range(0, len(order)):
-            for j in (i + d, i - d):
-                if 0 <= j < len(order) and order[j] in name_to_label:
-                    return name_to_label[order[j]]
-        return 0
+        return _label_of(name, materials)
 
     S, nz = float(size), n_slices
     cx, cy = S / 2 + rng.uniform(-0.03, 0.03) * S, S / 2 + rng.uniform(-0.03, 0.03) * S
