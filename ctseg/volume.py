@@ -145,7 +145,10 @@ def _run_dask(tasks, client, on_done):
         except (OSError, TimeoutError) as exc:
             raise ParameterError(f"client: cannot reach the Dask scheduler at {client} ({exc})") from None
     try:
-        futures = client.map(_segment_slice, *zip(*tasks), pure=False)
+        # slices go to the workers as data, not inside the task graph
+        images = client.scatter([t[0] for t in tasks])
+        futures = client.map(_segment_slice, images, [t[1] for t in tasks],
+                             [t[2] for t in tasks], pure=False)
         index = {f.key: k for k, f in enumerate(futures)}
         results = [None] * len(tasks)
         try:
