@@ -1,0 +1,222 @@
+"""ParaView plugin for ctseg: the composite segmentation filter and the stage filters of
+``ctseg.filters`` in the Filters menu, category "ctseg".
+
+Load it with Tools > Manage Plugins > Load New... (this file), or put this folder on
+PV_PLUGIN_PATH. ParaView's Python must be able to import ctseg and its dependencies (see
+the README's ParaView section). This file only declares the ParaView proxies: every filter
+is a ``ctseg.filters`` class, unchanged; the algorithms live in ``ctseg``. In
+``paraview.simple`` the filters are CTSegment, CTDensityMap, CTCVTSites, CTDelaunayMesh,
+CTTriangleGray, CTGraphCut and CTMaterialBoundary.
+"""
+from paraview.util.vtkAlgorithm import smdomain, smhint, smproperty, smproxy
+
+from ctseg.filters import (CTSegmentFilter, CVTSitesFilter, DelaunayMeshFilter,
+                           DensityMapFilter, GraphCutSegmentFilter, MaterialBoundaryFilter,
+                           TriangleGrayFilter)
+
+MENU = '<ShowInMenu category="ctseg"/>'
+AXES = ("z", "y", "x")
+INITS = ("ward", "random", "density_random")
+
+
+def _doc(text):
+    return smdomain.xml(f"<Documentation>{text}</Documentation>")
+
+
+def _enum(names):
+    entries = "".join(f'<Entry value="{k}" text="{n}"/>' for k, n in enumerate(names))
+    return smdomain.xml(f'<EnumerationDomain name="enum">{entries}</EnumerationDomain>')
+
+
+def _int(name, default, low, high, doc, apply):
+    """An integer property calling ``apply(self, value)``."""
+    @smproperty.intvector(name=name, command=f"Set{name}", default_values=[default])
+    @smdomain.intrange(min=low, max=high)
+    @_doc(doc)
+    def setter(self, value):
+        apply(self, int(value))
+    return setter
+
+
+def _double(name, default, low, high, doc, apply):
+    @smproperty.doublevector(name=name, command=f"Set{name}", default_values=[default])
+    @smdomain.doublerange(min=low, max=high)
+    @_doc(doc)
+    def setter(self, value):
+        apply(self, float(value))
+    return setter
+
+
+def _choice(name, names, default, doc, apply):
+    @smproperty.intvector(name=name, command=f"Set{name}", default_values=[default])
+    @_enum(names)
+    @_doc(doc)
+    def setter(self, value):
+        apply(self, names[int(value)])
+    return setter
+
+
+def _param(key, auto_zero=False):
+    """Apply to a keyword of ctseg.segment_image; 0 means 'from the data' where it may."""
+    def apply(self, value):
+        self.SetParameter(key, None if auto_zero and value == 0 else value)
+    return apply
+
+
+@smproxy.filter(name="CTSegment", label="CT Segment")
+@smhint.xml(MENU)
+@smproperty.xml('<OutputPort name="Mesh" index="0"/>')
+@smproperty.xml('<OutputPort name="Boundaries" index="1"/>')
+@smproperty.input(name="Input", port_index=0)
+@smdomain.datatype(dataTypes=["vtkImageData"], composite_data_supported=False)
+class CTSegment(CTSegmentFilter):
+    """CT slice or volume -> triangle mesh with one material per triangle
+    (Yang et al. 2014); volumes slice by slice with one material numbering."""
+
+    SetNumberOfSites = _int("NumberOfSites", 0, 0, 1000000,
+                            "CVT sites (mesh vertices) per slice; 0 = one per 128 pixels.",
+                            CTSegmentFilter.SetNumberOfSites)
+    SetSeed = _int("Seed", 0, 0, 2 ** 31 - 1, "Seed of the random initialisations.",
+                   CTSegmentFilter.SetSeed)
+    SetNumberOfMaterials = _int("NumberOfMaterials", 0, 0, 32,
+                                "Exact number of materials; 0 = found from the data.",
+                                CTSegmentFilter.SetNumberOfMaterials)
+    SetSliceAxis = _choice("SliceAxis", AXES, 0, "Axis along which a volume is sliced.",
+                           CTSegmentFilter.SetSliceAxis)
+    SetNumberOfJobs = _int("NumberOfJobs", 1, 0, 256,
+                           "Worker processes for a volume's slices (1 = in ParaView's "
+                           "process, 0 = one per core).", CTSegmentFilter.SetNumberOfJobs)
+    SetInitialization = _choice("Initialization", INITS, 0,
+                                "Initial CVT sites: Ward's clustering (the paper), uniform "
+                                "random, or random by density.", _param("init"))
+    SetSigma = _double("Sigma", 1.0, 0.0, 10.0, "Gaussian pre-smoothing of the density "
+                       "map, pixels.", _param("sigma"))
+    SetDensityFloor = _double("DensityFloor", 0.02, 1e-6, 1.0, "Density added everywhere "
+                              "so that flat regions keep sites.", _param("density_floor"))
+    SetDensitySaturation = _double("DensitySaturation", 0.0, 0.0, 1.0,
+                                   "Gradient that gets the full density, as a fraction of "
+                                   "the largest; 0 = from the noise (auto), 1 = the paper's "
+                                   "normalisation.",
+                                   lambda self, v: self.SetParameter("density_saturation",
+                                                                     "auto" if v == 0 else v))
+    SetDensityRidge = _double("DensityRidge", 2.0, 0.0, 8.0, "Ridge sharpening exponent "
+                              "(0 = the paper's map).", _param("density_ridge"))
+    SetWardBlockPixels = _int("WardBlockPixels", 0, 0, 64, "Ward pre-merge block size in pixels "
+                        "(0 = automatic, 1 = exact Ward).", _param("ward_block_px", True))
+    SetTolerance = _double("Tolerance", 0.01, 1e-6, 10.0, "Lloyd stops when no site moves "
+                           "more than this, pixels.", _param("tol_px"))
+    SetMaximumIterations = _int("MaximumIterations", 200, 1, 100000, "Lloyd iteration cap.",
+                                _param("max_iter"))
+    SetLambda = _double("Lambda", 70.0, 0.0, 1e6, "Weight of the neighbour terms of the "
+                        "graph cut (paper: 70).", _param("lam"))
+    SetBeta = _double("Beta", 0.286, 0.0, 100.0, "Weight of the distance term of the "
+                      "neighbour capacities (paper: 0.286).", _param("beta"))
+    SetTheta = _double("Theta", 0.0, 0.0, 255.0, "Seed-set width of the graph cut, gray "
+                       "levels on 0-255; 0 = 10% of the component's range.",
+                       _param("theta", True))
+    SetStepThreshold = _double("StepThreshold", 0.0, 0.0, 255.0, "Gray step (0-255) above "
+                               "which a triangle straddles a boundary; 0 = from the noise.",
+                               _param("step_threshold", True))
+    SetMergeK = _double("MergeK", 5.0, 0.0, 100.0, "Materials closer than MergeK noise "
+                        "sigmas (+ MergeRel x gray) are one.", _param("merge_k"))
+    SetMergeRel = _double("MergeRel", 0.2, 0.0, 10.0, "Gray-proportional part of the "
+                          "material separation (beam hardening).", _param("merge_rel"))
+    SetMergeFloor = _double("MergeFloor", 2.0, 0.0, 255.0, "Smallest material separation, "
+                            "gray levels on 0-255.", _param("merge_floor"))
+    SetMergeThreshold = _double("MergeThreshold", 0.0, 0.0, 255.0, "Fixed material "
+                                "separation (0-255) instead of the rule above; 0 = off.",
+                                _param("merge_threshold", True))
+    SetMinTriangles = _int("MinTriangles", 2, 1, 1000000, "Components smaller than this "
+                           "are not split further.", _param("min_triangles"))
+    SetMaxDepth = _int("MaxDepth", 32, 0, 1000, "Recursion depth cap of the graph cuts.",
+                       _param("max_depth"))
+    SetMinMaterialArea = _double("MinMaterialArea", 0.0, 0.0, 1e12, "Interior area (px) a "
+                                 "gray mode needs to be a material; 0 = automatic.",
+                                 _param("min_material_area", True))
+    SetMinPocketArea = _double("MinPocketArea", 4.0, 0.0, 1e12, "Interior area (px) of a "
+                               "material that makes a component worth splitting.",
+                               _param("min_pocket_area"))
+    SetWeightByEdgeLength = _int("WeightByEdgeLength", 0, 0, 1, "Multiply neighbour "
+                                 "capacities by the shared edge length (not the paper's).",
+                                 lambda self, v: self.SetParameter("weight_by_edge_length", bool(v)))
+
+
+@smproxy.filter(name="CTDensityMap", label="CT Density Map")
+@smhint.xml(MENU)
+@smproperty.input(name="Input", port_index=0)
+@smdomain.datatype(dataTypes=["vtkImageData"], composite_data_supported=False)
+class CTDensityMap(DensityMapFilter):
+    """Stage 1: the gradient density map of a slice, as a 'density' point array."""
+
+    SetSigma = _double("Sigma", 1.0, 0.0, 10.0, "Gaussian pre-smoothing, pixels.",
+                       DensityMapFilter.SetSigma)
+    SetFloor = _double("Floor", 0.02, 1e-6, 1.0, "Density added everywhere.",
+                       DensityMapFilter.SetFloor)
+    SetSaturation = _double("Saturation", 0.0, 0.0, 1.0, "Fraction of the largest gradient "
+                            "that gets the full density; 0 = from the noise (auto).",
+                            lambda self, v: DensityMapFilter.SetSaturation(
+                                self, "auto" if v == 0 else v))
+    SetRidge = _double("Ridge", 2.0, 0.0, 8.0, "Ridge sharpening exponent (0 = off).",
+                       DensityMapFilter.SetRidge)
+
+
+@smproxy.filter(name="CTCVTSites", label="CT CVT Sites")
+@smhint.xml(MENU)
+@smproperty.input(name="Input", port_index=0)
+@smdomain.datatype(dataTypes=["vtkImageData"], composite_data_supported=False)
+class CTCVTSites(CVTSitesFilter):
+    """Stages 2-3: Ward-initialised CVT of a density map; the sites as vertices."""
+
+    SetNumberOfSites = _int("NumberOfSites", 0, 0, 1000000, "0 = one per 128 pixels.",
+                            CVTSitesFilter.SetNumberOfSites)
+    SetSeed = _int("Seed", 0, 0, 2 ** 31 - 1, "Seed of the random initialisations.",
+                   CVTSitesFilter.SetSeed)
+    SetInitialization = _choice("Initialization", INITS, 0, "Initial sites.",
+                                CVTSitesFilter.SetInitialization)
+    SetTolerance = _double("Tolerance", 0.01, 1e-6, 10.0, "Lloyd stopping move, pixels.",
+                           CVTSitesFilter.SetTolerance)
+    SetMaximumIterations = _int("MaximumIterations", 200, 1, 100000, "Lloyd iteration cap.",
+                                CVTSitesFilter.SetMaximumIterations)
+
+
+@smproxy.filter(name="CTDelaunayMesh", label="CT Delaunay Mesh")
+@smhint.xml(MENU)
+@smproperty.input(name="Input", port_index=0)
+@smdomain.datatype(dataTypes=["vtkPolyData"], composite_data_supported=False)
+class CTDelaunayMesh(DelaunayMeshFilter):
+    """Stage 4: the Delaunay triangles of the CVT sites."""
+
+
+@smproxy.filter(name="CTTriangleGray", label="CT Triangle Gray")
+@smhint.xml(MENU)
+@smproperty.input(name="Image", port_index=1)
+@smdomain.datatype(dataTypes=["vtkImageData"], composite_data_supported=False)
+@smproperty.input(name="Mesh", port_index=0)
+@smdomain.datatype(dataTypes=["vtkPolyData"], composite_data_supported=False)
+class CTTriangleGray(TriangleGrayFilter):
+    """Stage 5: exact area-weighted mean gray of every triangle over the image."""
+
+
+@smproxy.filter(name="CTGraphCut", label="CT Graph Cut")
+@smhint.xml(MENU)
+@smproperty.input(name="Image", port_index=1)
+@smdomain.datatype(dataTypes=["vtkImageData"], composite_data_supported=False)
+@smproperty.input(name="Mesh", port_index=0)
+@smdomain.datatype(dataTypes=["vtkPolyData"], composite_data_supported=False)
+class CTGraphCut(GraphCutSegmentFilter):
+    """Stages 6-7: recursive graph cut of the triangles into materials."""
+
+    SetNumberOfMaterials = _int("NumberOfMaterials", 0, 0, 32, "0 = found from the data.",
+                                GraphCutSegmentFilter.SetNumberOfMaterials)
+    SetLambda = _double("Lambda", 70.0, 0.0, 1e6, "Neighbour term weight (paper: 70).",
+                        GraphCutSegmentFilter.SetLambda)
+    SetBeta = _double("Beta", 0.286, 0.0, 100.0, "Distance term weight (paper: 0.286).",
+                      GraphCutSegmentFilter.SetBeta)
+
+
+@smproxy.filter(name="CTMaterialBoundary", label="CT Material Boundary")
+@smhint.xml(MENU)
+@smproperty.input(name="Input", port_index=0)
+@smdomain.datatype(dataTypes=["vtkPolyData"], composite_data_supported=False)
+class CTMaterialBoundary(MaterialBoundaryFilter):
+    """The edges between materials as polylines with the materials each side."""
