@@ -26,7 +26,8 @@ a Dask cluster (--dask ADDRESS).
 Outputs, by extension: .vtp (default; VTK XML PolyData, world coordinates, cell arrays
 'material', 'gray' in the input's units, 'slice'), .vtu, .ply (material as face colour
 and quality), .stl (one file per material: NAME_material<k>.stl), .obj (one group per
-material, colours in NAME.mtl). Every mesh passes pymeshlab's checks before it is written,
+material, colours in NAME.mtl), .mlp (a MeshLab project with one layer per material,
+each a coloured PLY NAME_material<k>.ply). Every mesh passes pymeshlab's checks before it is written,
 and every file is written under a temporary name and renamed: an error or Ctrl-C leaves
 no partial file.
 
@@ -157,7 +158,7 @@ def build_parser():
                        description=MESH_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     m.add_argument("input", help="image file or folder (see above)")
     m.add_argument("-o", "--output", required=True,
-                   help="output mesh: .vtp, .vtu, .ply, .stl or .obj")
+                   help="output mesh: .vtp, .vtu, .ply, .stl, .obj or .mlp")
     m.add_argument("--boundary", help="also write the material boundary polylines (.vtp)")
     m.add_argument("--sites", type=int, default=None,
                    help=f"CVT sites per slice (default: pixels / {PIXELS_PER_SITE})")

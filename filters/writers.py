@@ -8,7 +8,8 @@ Formats: ``.vtp`` (VTK XML PolyData, the default: every cell array), ``.vtu`` (V
 unstructured grid, same arrays), ``.ply`` (binary; material as face colour and as face
 quality, which MeshLab shows and filters on), ``.stl`` (binary, one file per material:
 ``NAME_material<k>.stl``, as STL has no per-face data), ``.obj`` (one group and one
-``usemtl`` per material, colours in a ``.mtl`` beside it).
+``usemtl`` per material, colours in a ``.mtl`` beside it), ``.mlp`` (a MeshLab project:
+one layer per material, each a coloured binary PLY ``NAME_material<k>.ply`` beside it).
 """
 import contextlib
 import os
@@ -20,7 +21,7 @@ from ctseg.errors import InputError
 
 from .convert import polydata_to_arrays
 
-MESH_FORMATS = (".vtp", ".vtu", ".ply", ".stl", ".obj")
+MESH_FORMATS = (".vtp", ".vtu", ".ply", ".stl", ".obj", ".mlp")
 
 # Material colours: colour-blind-safe (Okabe-Ito), air first; shared with the figure.
 PALETTE = np.array([
@@ -95,16 +96,35 @@ def _write_ply(points, triangles, material, tmp):
                          save_vertex_color=False, save_vertex_quality=False)
 
 
-def _write_stl(points, triangles, tmp):
-    import pymeshlab
-
+def _submesh(points, triangles):
+    """The points the triangles use, and the triangles renumbered onto them."""
     used = np.unique(triangles)
     remap = np.full(len(points), -1, np.int64)
     remap[used] = np.arange(len(used))
+    return points[used], remap[triangles]
+
+
+def _write_stl(points, triangles, tmp):
+    import pymeshlab
+
+    pts, tri = _submesh(points, triangles)
     ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=points[used],
-                               face_matrix=remap[triangles].astype(np.int32)))
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=pts, face_matrix=tri.astype(np.int32)))
     ms.save_current_mesh(tmp, binary=True)
+
+
+def _write_mlp(names, labels, tmp):
+    """A MeshLab project: one layer per file (MeshLab's own project writer records no file
+    names for meshes it did not load, so the XML is written here)."""
+    from xml.sax.saxutils import quoteattr
+
+    layers = "".join(
+        f'  <MLMesh label={quoteattr(label)} filename={quoteattr(name)} visible="1">\n'
+        "   <MLMatrix44>\n1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1 \n</MLMatrix44>\n  </MLMesh>\n"
+        for name, label in zip(names, labels))
+    with open(tmp, "w") as fh:
+        fh.write("<!DOCTYPE MeshLabDocument>\n<MeshLabProject>\n <MeshGroup>\n" + layers
+                 + " </MeshGroup>\n <RasterGroup/>\n</MeshLabProject>\n")
 
 
 def _write_obj(points, triangles, material, tmp_obj, tmp_mtl, mtl_name):
@@ -128,6 +148,8 @@ def mesh_outputs(path):
     stem, ext = os.path.splitext(os.fspath(path))
     if ext.lower() == ".stl":
         return [f"{stem}_material{{material}}.stl"]
+    if ext.lower() == ".mlp":
+        return [os.fspath(path), f"{stem}_material{{material}}.ply"]
     if ext.lower() == ".obj":
         return [os.fspath(path), stem + ".mtl"]
     return [os.fspath(path)]
@@ -200,6 +222,17 @@ def _write(poly, path, ext, points, triangles, arrays):
             for k, tmp in zip(mats, temps):
                 _write_stl(points, triangles[material == k], tmp)
         return outs
+    if ext == ".mlp":
+        project, pattern = mesh_outputs(path)
+        mats = np.unique(material)
+        plys = [pattern.format(material=k) for k in mats]
+        with atomic_outputs([project] + plys) as temps:
+            for k, tmp in zip(mats, temps[1:]):
+                pts, tri = _submesh(points, triangles[material == k])
+                _write_ply(pts, tri, np.full(len(tri), k), tmp)
+            _write_mlp([os.path.basename(p) for p in plys], [f"material {k}" for k in mats],
+                       temps[0])
+        return [project] + plys
     obj, mtl = mesh_outputs(path)
     with atomic_outputs([obj, mtl]) as (tmp_obj, tmp_mtl):
         _write_obj(points, triangles, material, tmp_obj, tmp_mtl, os.path.basename(mtl))

@@ -374,11 +374,33 @@ def test_obj_one_group_per_material(tmp_path):
     assert "newmtl material_2" in (tmp_path / "m.mtl").read_text()
 
 
+def test_meshlab_project_one_layer_per_material(tmp_path):
+    import pymeshlab
+
+    from ctseg.filters.writers import material_colors
+
+    poly, _, _, _ = _two_slice_mesh()
+    written, _ = write_mesh(poly, tmp_path / "m.mlp")
+    assert [os.path.basename(w) for w in written] == ["m.mlp"] + [f"m_material{k}.ply" for k in range(3)]
+    ms = pymeshlab.MeshSet()
+    ms.load_project(str(tmp_path / "m.mlp"))
+    p, t, arrays = polydata_to_arrays(poly)
+    assert ms.mesh_number() == 3
+    for k in range(3):
+        layer = ms.mesh(k)
+        want = t[arrays["material"] == k]
+        got = np.sort(np.round(layer.vertex_matrix()[layer.face_matrix()], 6).reshape(len(want), -1), axis=0)
+        np.testing.assert_allclose(got, np.sort(np.round(p[want], 6).reshape(len(want), -1), axis=0))
+        rgb = np.round(layer.face_color_matrix()[:, :3] * 255).astype(int)
+        assert np.all(rgb == material_colors([k])[0])
+        assert np.all(layer.face_scalar_array() == k)
+
+
 def test_failed_check_writes_nothing(tmp_path):
     # the same triangle twice: a duplicated face
     poly = mesh_to_polydata(np.array([[0, 0], [1, 0], [0, 1]], float),
                             np.array([[0, 1, 2], [0, 1, 2]]), [0, 1], [1.0, 2.0])
-    for ext in (".vtp", ".ply", ".stl", ".obj"):
+    for ext in (".vtp", ".ply", ".stl", ".obj", ".mlp"):
         with pytest.raises(MeshCheckError, match="duplicated_faces"):
             write_mesh(poly, tmp_path / f"m{ext}")
     assert os.listdir(tmp_path) == []

@@ -1,0 +1,1 @@
+"""GUI-free part of the CTSeg module (see logic.py)."""
