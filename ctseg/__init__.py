@@ -13,7 +13,7 @@ if (_os.path.isfile(_os.path.join(_root, "pyproject.toml"))
     __path__.append(_root)  # noqa: F821 - the package's own search path
 
 from .density import density_map
-from .errors import CTSegError, InputError, MeshCheckError, ParameterError
+from .errors import CTSegError, InputError, MeshCheckError, ParameterError, ResumeError
 from .sites import initial_sites, random_sites, density_random_sites, ward_sites
 from .cvt import lloyd_cvt, CVTResult
 from .triangulation import delaunay_mesh, TriangleMesh
@@ -28,4 +28,5 @@ __all__ = [
     "lloyd_cvt", "CVTResult", "delaunay_mesh", "TriangleMesh", "triangle_gray",
     "graphcut_split", "segment_triangles", "segment_image", "SegmentedMesh",
     "default_n_sites", "CTSegError", "InputError", "ParameterError", "MeshCheckError",
+    "ResumeError",
 ]

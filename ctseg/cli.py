@@ -2,12 +2,13 @@
 import argparse
 import json
 import os
+import shutil
 import sys
 import time
 
 import numpy as np
 
-from .errors import CTSegError, InputError
+from .errors import CTSegError, InputError, ResumeError
 from .pipeline import PIXELS_PER_SITE
 
 MESH_HELP = f"""\
@@ -83,15 +84,21 @@ def _mesh(args):
     progress = _progress_printer(show)
     common = dict(n_sites=args.sites, seed=args.seed, n_materials=args.materials)
     if image.ndim == 2:
+        if args.resume:
+            print("ctseg: note: --resume applies to volumes, whose slices are saved as they "
+                  "finish; a single slice is one step and starts afresh", file=sys.stderr)
         result = segment_image(image, progress=progress, **common)
         fig_image, fig_seg, fig_name = image, result, os.path.basename(args.input)
         diag = dict(result.diagnostics)
     else:
         ax = slice_axis(args.axis)
         mid = image.shape[ax] // 2
+        args.checkpoint = checkpoint_folder(args.output)
+        if not args.resume and os.path.isdir(args.checkpoint):
+            shutil.rmtree(args.checkpoint)
         result = segment_volume(image, axis=ax, n_jobs=args.jobs, client=args.dask,
                                 progress=progress, keep_maps=(mid,) if args.figure else (),
-                                **common)
+                                checkpoint=args.checkpoint, **common)
         fig_image, fig_seg = volume_slice(image, ax, mid), result.slices[mid]
         fig_name = f"{os.path.basename(args.input.rstrip(os.sep))} slice {mid} ({args.axis})"
         diag = dict(result.diagnostics)
@@ -123,9 +130,25 @@ def _mesh(args):
         with atomic_outputs([args.report]) as (tmp,):
             with open(tmp, "w") as fh:
                 json.dump(diag, fh, indent=2)
+    if getattr(args, "checkpoint", None):
+        shutil.rmtree(args.checkpoint, ignore_errors=True)  # everything is written
     if not args.quiet:
         _summary(args, image, diag, written)
     return 0
+
+
+def checkpoint_folder(output):
+    """Where a volume run keeps its finished slices until its outputs are written."""
+    return os.fspath(output) + ".ctseg-partial"
+
+
+def _resume_hint(args):
+    folder = getattr(args, "checkpoint", None)
+    if not folder or not os.path.isdir(folder):
+        return ""
+    n = sum(1 for f in os.listdir(folder) if f.startswith("slice_") and f.endswith(".npz"))
+    return (f"; {n} finished slice(s) are kept in {folder}: run the same command with "
+            "--resume to go on from there") if n else ""
 
 
 def _summary(args, image, diag, written):
@@ -172,6 +195,9 @@ def build_parser():
                         "1: this process)")
     m.add_argument("--dask", metavar="ADDRESS",
                    help="run a volume's slices on this Dask scheduler (e.g. tcp://host:8786)")
+    m.add_argument("--resume", action="store_true",
+                   help="go on with a volume run that was interrupted or failed: the slices "
+                        "it finished (kept in OUTPUT.ctseg-partial) are not computed again")
     m.add_argument("--series", metavar="UID",
                    help="DICOM SeriesInstanceUID, for a folder holding several series")
     m.add_argument("--report", help="write all diagnostics as JSON")
@@ -190,10 +216,12 @@ def main(argv=None):
     except CTSegError as exc:
         if args.debug:
             raise
-        print(f"ctseg: error: {exc}", file=sys.stderr)
+        hint = "" if isinstance(exc, ResumeError) else _resume_hint(args)
+        print(f"ctseg: error: {exc}{hint}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("ctseg: interrupted; no partial output was left", file=sys.stderr)
+        print(f"ctseg: interrupted; no partial output was left{_resume_hint(args)}",
+              file=sys.stderr)
         return 130
     return 1
 

@@ -19,3 +19,7 @@ class ParameterError(CTSegError, ValueError):
 
 class MeshCheckError(CTSegError, RuntimeError):
     """A mesh failed the checks that every written mesh must pass."""
+
+
+class ResumeError(InputError):
+    """Saved slices cannot be resumed: made from another input or other parameters."""

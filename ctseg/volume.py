@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._validate import as_image, check_number
-from .errors import CTSegError, InputError, ParameterError
+from .errors import CTSegError, InputError, ParameterError, ResumeError
 from .intensity import gray_scale
 from .pipeline import SEGMENT_DEFAULTS, SegmentedMesh, material_levels, segment_image
 
@@ -109,29 +109,37 @@ def _as_volume(volume):
 
 
 def _run_local(tasks, n_jobs, on_done):
+    """Run ``{k: task}`` in worker processes; ``on_done(k, seg)`` as each finishes."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
     import multiprocessing
 
-    results = [None] * len(tasks)
     # fork where there is one: spawn and forkserver start sys.executable, which inside
     # ParaView or Slicer is the application itself, and re-run the caller's __main__
     method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    with ProcessPoolExecutor(max_workers=n_jobs,
-                             mp_context=multiprocessing.get_context(method)) as pool:
-        futures = {pool.submit(_segment_slice, *task): k for k, task in enumerate(tasks)}
-        try:
-            for fut in as_completed(futures):
-                k = futures[fut]
-                results[k] = _slice_result(fut.result, k)
-                on_done(k)
-        except BaseException:
-            for fut in futures:
-                fut.cancel()
-            raise
-    return results
+    pool = ProcessPoolExecutor(max_workers=n_jobs, mp_context=multiprocessing.get_context(method),
+                               initializer=_ignore_sigint)
+    futures = {pool.submit(_segment_slice, *task): k for k, task in tasks.items()}
+    try:
+        for fut in as_completed(futures):
+            k = futures[fut]
+            on_done(k, _slice_result(fut.result, k))
+    except BaseException:
+        # Ctrl-C or a failed slice: no new slices; the workers finish the one they hold
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+
+
+def _ignore_sigint():
+    """Workers leave Ctrl-C to the parent, which stops the run and reports once (a
+    terminal sends SIGINT to the whole process group)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _run_dask(tasks, client, on_done):
+    """Run ``{k: task}`` on a Dask cluster; ``on_done(k, seg)`` as each finishes."""
     try:
         from distributed import Client, as_completed
     except ImportError:
@@ -145,24 +153,102 @@ def _run_dask(tasks, client, on_done):
         except (OSError, TimeoutError) as exc:
             raise ParameterError(f"client: cannot reach the Dask scheduler at {client} ({exc})") from None
     try:
+        keys = list(tasks)
         # slices go to the workers as data, not inside the task graph
-        images = client.scatter([t[0] for t in tasks])
-        futures = client.map(_segment_slice, images, [t[1] for t in tasks],
-                             [t[2] for t in tasks], pure=False)
-        index = {f.key: k for k, f in enumerate(futures)}
-        results = [None] * len(tasks)
+        images = client.scatter([tasks[k][0] for k in keys])
+        futures = client.map(_segment_slice, images, [tasks[k][1] for k in keys],
+                             [tasks[k][2] for k in keys], pure=False)
+        index = {f.key: k for k, f in zip(keys, futures)}
         try:
             for fut in as_completed(futures):
                 k = index[fut.key]
-                results[k] = _slice_result(fut.result, k)
-                on_done(k)
+                on_done(k, _slice_result(fut.result, k))
         except BaseException:
             client.cancel(futures)
             raise
-        return results
     finally:
         if own:
             client.close()
+
+
+class _Checkpoint:
+    """Finished slices of one volume run, saved one file each in a folder.
+
+    ``meta.json`` names what the slices were made from (the volume's shape, dtype and
+    SHA-1, the axis, every parameter); a run with anything different refuses the folder
+    rather than mixing slices of two runs. Each slice is written under a temporary name
+    and renamed, so an interrupt never leaves half a slice.
+    """
+
+    def __init__(self, folder, vol, axis, params):
+        import hashlib
+
+        self.folder = os.fspath(folder)
+        self.meta = {"shape": list(vol.shape), "dtype": str(vol.dtype), "axis": int(axis),
+                     "sha1": hashlib.sha1(np.ascontiguousarray(vol).tobytes()).hexdigest(),
+                     "params": {k: repr(v) for k, v in sorted(params.items())}}
+
+    def _meta_path(self):
+        return os.path.join(self.folder, "meta.json")
+
+    def load(self):
+        """{slice index: SegmentedMesh} already done; creates the folder if new."""
+        import json
+
+        if not os.path.isdir(self.folder):
+            try:
+                os.makedirs(self.folder)
+            except OSError as exc:
+                raise InputError(f"{self.folder}: cannot make the checkpoint folder ({exc.strerror})") from None
+        if os.path.exists(self._meta_path()):
+            with open(self._meta_path()) as fh:
+                old = json.load(fh)
+            if old != self.meta:
+                differs = sorted(k for k in set(old) | set(self.meta) if old.get(k) != self.meta.get(k))
+                if "params" in differs:
+                    differs.remove("params")
+                    differs += sorted(k for k in set(old["params"]) | set(self.meta["params"])
+                                      if old["params"].get(k) != self.meta["params"].get(k))
+                raise ResumeError(f"{self.folder}: these slices were made from another input or "
+                                 f"other parameters (differs in: {', '.join(differs)}); delete "
+                                 "the folder or run without resuming")
+        else:
+            with open(self._meta_path(), "w") as fh:
+                json.dump(self.meta, fh)
+        done = {}
+        for name in sorted(os.listdir(self.folder)):
+            if name.startswith("slice_") and name.endswith(".npz"):
+                done[int(name[6:-4])] = _load_slice(os.path.join(self.folder, name))
+        return done
+
+    def save(self, k, seg):
+        path = os.path.join(self.folder, f"slice_{k:05d}.npz")
+        tmp = path + ".tmp.npz"
+        _save_slice(tmp, seg)
+        os.replace(tmp, path)
+
+
+_SLICE_ARRAYS = ("points", "triangles", "material", "gray", "boundary_edges",
+                 "boundary_sides", "material_gray", "adjacency")
+
+
+def _save_slice(path, seg):
+    import json
+
+    np.savez(path, shape=np.array(seg.shape), diagnostics=np.array(json.dumps(seg.diagnostics)),
+             **{name: getattr(seg, name) for name in _SLICE_ARRAYS})
+
+
+def _load_slice(path):
+    import json
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return SegmentedMesh(shape=tuple(int(v) for v in z["shape"]),
+                                 diagnostics=json.loads(str(z["diagnostics"])),
+                                 **{name: z[name] for name in _SLICE_ARRAYS})
+    except Exception as exc:
+        raise InputError(f"{path}: a damaged checkpoint slice ({exc}); delete it") from None
 
 
 def _slice_result(get, k):
@@ -173,7 +259,7 @@ def _slice_result(get, k):
 
 
 def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=None,
-                   progress=None, keep_maps=(), **params):
+                   progress=None, keep_maps=(), checkpoint=None, **params):
     """Segment a 3D volume slice by slice into triangle meshes with one numbering of the
     materials for the whole volume.
 
@@ -203,6 +289,11 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
         ``progress(fraction_done, message)`` after each slice.
     keep_maps : iterable of int
         Slices whose density and CVT maps are kept (for a figure); the others drop them.
+    checkpoint : str or path-like, optional
+        A folder where every finished slice is saved at once; slices already there, from
+        a run on the same volume with the same parameters, are loaded instead of being
+        computed again (resume after an interrupt or a failure). A folder from another
+        input or other parameters raises InputError saying what differs.
     **params
         Any keyword of :func:`ctseg.segment_image` (``n_materials``, ``lam``, ...).
 
@@ -244,26 +335,36 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
     t_levels = time.perf_counter() - t_start
 
     keep = {int(k) for k in keep_maps}
-    tasks = [(np.ascontiguousarray(volume_slice(vol, ax, k)), slice_params, k in keep)
-             for k in range(n_slices)]
-    done = [0]
+    store = None
+    if checkpoint is not None:
+        store = _Checkpoint(checkpoint, vol, ax, {**SEGMENT_DEFAULTS, **params,
+                                                  "n_sites": n_sites, "seed": seed})
+    slices = [None] * n_slices
+    if store is not None:
+        for k, seg in store.load().items():
+            if k not in keep:  # a figure slice is recomputed: its maps are not stored
+                slices[k] = seg
+    tasks = {k: (np.ascontiguousarray(volume_slice(vol, ax, k)), slice_params, k in keep)
+             for k in range(n_slices) if slices[k] is None}
+    resumed = n_slices - len(tasks)
 
-    def on_done(k):
-        done[0] += 1
-        report(done[0] / n_slices, f"slice {done[0]}/{n_slices}")
+    def on_done(k, seg):
+        slices[k] = seg
+        if store is not None:
+            store.save(k, seg)
+        done = sum(s is not None for s in slices)
+        report(done / n_slices, f"slice {done}/{n_slices}")
 
     if client is not None:
         executor = "dask"
-        slices = _run_dask(tasks, client, on_done)
-    elif n_jobs > 1 and n_slices > 1:
-        executor = f"{min(n_jobs, n_slices)} processes"
-        slices = _run_local(tasks, min(n_jobs, n_slices), on_done)
+        _run_dask(tasks, client, on_done)
+    elif n_jobs > 1 and len(tasks) > 1:
+        executor = f"{min(n_jobs, len(tasks))} processes"
+        _run_local(tasks, min(n_jobs, len(tasks)), on_done)
     else:
         executor = "serial"
-        slices = []
-        for k, task in enumerate(tasks):
-            slices.append(_slice_result(lambda: _segment_slice(*task), k))
-            on_done(k)
+        for k, task in tasks.items():
+            on_done(k, _slice_result(lambda: _segment_slice(*task), k))
     factor = scale[1]
     mat_gray = levels / factor + scale[0] if factor else np.full(len(levels), scale[0])
     times = {}
@@ -275,6 +376,7 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
         "axis": "zyx"[ax],
         "n_slices": int(n_slices),
         "executor": executor,
+        "resumed_slices": int(resumed),
         "gray_rescale": {"offset": scale[0], "factor": scale[1]},
         "level_sample_slices": [int(k) for k in sample],
         "material_levels_255": [float(v) for v in levels],

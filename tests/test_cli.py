@@ -10,6 +10,8 @@ from ctseg.cli import main
 from ctseg.filters import polydata_to_arrays, read_polydata
 from ctseg.meshcheck import mesh_check_report
 
+from ctseg.phantoms import make_volume
+
 from conftest import disc_image, requires_rendering
 
 
@@ -99,10 +101,13 @@ def test_volume_from_nrrd_to_ply_with_truth(tmp_path, capsys):
     assert "slices along z" in capsys.readouterr().out
 
 
-def test_interrupt_leaves_no_partial_output(tmp_path, monkeypatch, capsys):
+def test_interrupt_leaves_no_partial_output_and_resume_finishes(tmp_path, monkeypatch, capsys):
+    """Ctrl-C in the third slice: no output file, the two finished slices kept; --resume
+    computes only the rest and writes the same bytes as an uninterrupted run."""
     import ctseg.volume
 
     calls = []
+    real = ctseg.volume._segment_slice
 
     def interrupted(image, params, keep_maps=False):
         calls.append(1)
@@ -110,28 +115,58 @@ def test_interrupt_leaves_no_partial_output(tmp_path, monkeypatch, capsys):
             raise KeyboardInterrupt
         return real(image, params, keep_maps)
 
-    real = ctseg.volume._segment_slice
-    monkeypatch.setattr(ctseg.volume, "_segment_slice", interrupted)
-    vol = np.random.default_rng(0).random((4, 16, 16))
+    vol = make_volume(4, 48, seed=1).image
     np.save(tmp_path / "v.npy", vol)
-    rc = main(["mesh", str(tmp_path / "v.npy"), "-o", str(tmp_path / "m.vtp"), "--jobs", "1",
-               "--report", str(tmp_path / "r.json")])
-    assert rc == 130 and "interrupted" in capsys.readouterr().err
-    assert os.listdir(tmp_path) == ["v.npy"]
+    cmd = ["mesh", str(tmp_path / "v.npy"), "-o", str(tmp_path / "m.vtp"), "--jobs", "1",
+           "--sites", "60", "--report", str(tmp_path / "r.json")]
+    monkeypatch.setattr(ctseg.volume, "_segment_slice", interrupted)
+    assert main(cmd) == 130
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "2 finished slice(s)" in err and "--resume" in err
+    assert sorted(os.listdir(tmp_path)) == ["m.vtp.ctseg-partial", "v.npy"]
+    monkeypatch.setattr(ctseg.volume, "_segment_slice", real)
+    assert main(cmd + ["--resume", "-q"]) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["resumed_slices"] == 2 and not (tmp_path / "m.vtp.ctseg-partial").exists()
+    resumed = (tmp_path / "m.vtp").read_bytes()
+    assert main(cmd + ["-q"]) == 0  # afresh
+    assert (tmp_path / "m.vtp").read_bytes() == resumed
 
 
-@requires_rendering
-def test_figure_of_a_slice_and_of_a_volume(slice_files):
-    """The six panels, rendered offscreen; a volume's figure shows its middle slice."""
-    from ctseg.filters.readers import read_image
+def test_resume_refuses_slices_of_other_parameters(tmp_path, capsys):
+    from ctseg.volume import segment_volume
 
-    d = slice_files
-    assert main(["mesh", str(d / "slice.npy"), "-o", str(d / "m.vtp"), "--sites", "150",
-                 "--figure", str(d / "f.png"), "-q"]) == 0
-    fig, _ = read_image(d / "f.png")
-    vol = np.stack([np.load(d / "slice.npy")] * 3)
-    np.save(d / "v.npy", vol)
-    assert main(["mesh", str(d / "v.npy"), "-o", str(d / "v.vtp"), "--sites", "150", "--jobs", "1",
-                 "--figure", str(d / "fv.png"), "-q"]) == 0
-    figv, _ = read_image(d / "fv.png")
-    assert fig.shape == figv.shape and fig.shape[1] > fig.shape[0] > 300
+    from ctseg.cli import checkpoint_folder
+
+    vol = make_volume(3, 40, seed=2).image
+    np.save(tmp_path / "v.npy", vol)
+    segment_volume(vol, n_sites=50, checkpoint=checkpoint_folder(tmp_path / "m.vtp"))
+    assert main(["mesh", str(tmp_path / "v.npy"), "-o", str(tmp_path / "m.vtp"), "--jobs", "1",
+                 "--sites", "60", "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "differs in: n_sites" in err and len(err.strip().splitlines()) == 1
+
+
+def test_real_sigint_to_the_command(tmp_path):
+    """Ctrl-C at a terminal (SIGINT to the whole process group, workers included) during a
+    two-process volume job: exit 130, one message, no output, the finished slices kept."""
+    import signal
+    import time
+
+    vol = make_volume(16, 64, seed=3).image
+    np.save(tmp_path / "v.npy", vol)
+    proc = subprocess.Popen([sys.executable, "-m", "ctseg.cli", "mesh", str(tmp_path / "v.npy"),
+                             "-o", str(tmp_path / "m.vtp"), "--jobs", "2", "--sites", "100"],
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    folder = tmp_path / "m.vtp.ctseg-partial"
+    deadline = time.time() + 60
+    while time.time() < deadline and not (folder.exists() and any(
+            f.startswith("slice_") for f in os.listdir(folder))):
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "--resume" in err and "Traceback" not in err, err
+    assert len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "m.vtp").exists()
+    assert not [f for f in os.listdir(tmp_path) if f.startswith(".ctseg-")]
