@@ -75,11 +75,7 @@ def _mesh(args):
 
     _check_outputs(args)
     image, geom = read_image(args.input, series=args.series)
-    image = np.asarray(image)
-    if image.ndim == 3 and image.shape[0] == 1:
-        image = image[0]
-    if image.ndim not in (2, 3):
-        raise InputError(f"{args.input}: shape {image.shape} is neither a slice nor a volume")
+    image = _checked_input(np.asarray(image), args.input)
     show = sys.stderr.isatty() and not args.quiet
     progress = _progress_printer(show)
     common = dict(n_sites=args.sites, seed=args.seed, n_materials=args.materials)
@@ -149,6 +145,26 @@ def _resume_hint(args):
     n = sum(1 for f in os.listdir(folder) if f.startswith("slice_") and f.endswith(".npz"))
     return (f"; {n} finished slice(s) are kept in {folder}: run the same command with "
             "--resume to go on from there") if n else ""
+
+
+def _checked_input(image, path):
+    """The input as a slice or a volume, or an InputError naming the file."""
+    from ._validate import as_image
+    from .volume import as_volume
+
+    if image.ndim == 3 and image.shape[0] == 1:
+        image = image[0]
+    if image.ndim == 3 and image.shape[2] in (3, 4) and min(image.shape[:2]) > 4:
+        raise InputError(f"{path}: shape {image.shape} looks like a colour image ({image.shape[2]} "
+                         "channels last); convert it to gray first (ctseg converts colour PNG "
+                         "and TIFF files itself), or give a volume as (slices, rows, cols)")
+    if image.ndim == 2:
+        as_image(image, name=path)
+    elif image.ndim == 3:
+        as_volume(image, name=path)
+    else:
+        raise InputError(f"{path}: shape {image.shape} is neither a slice nor a volume")
+    return image
 
 
 def _summary(args, image, diag, written):

@@ -196,18 +196,36 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
     # assignment stays exactly the nearest site (the energy argument needs that).
     d, idx = cKDTree(sites).query(px, k=2, workers=-1)
     labels, u, l = idx[:, 0], d[:, 0], d[:, 1]
-    energy = [_energy(px, w, sites, labels)]
+    # F from per-region sums: sum_j w|p_j - s|^2 = Q - 2 s.S + |s|^2 W over each region,
+    # with coordinates taken about the image centre to keep the cancellation small;
+    # the same sums give the centroids of the next iteration
+    centre = np.array([(cols - 1) / 2.0, (rows - 1) / 2.0])
+    q = w * ((xr - centre[0]) ** 2 + (yr - centre[1]) ** 2)
+
+    def region_sums(labels):
+        return (np.bincount(labels, w, n), np.bincount(labels, wx, n),
+                np.bincount(labels, wy, n), np.bincount(labels, q, n))
+
+    def region_energy(sums, sites):
+        W, Sx, Sy, Q = sums
+        c = sites - centre
+        Sxc, Syc = Sx - centre[0] * W, Sy - centre[1] * W
+        return float(np.sum(Q - 2.0 * (c[:, 0] * Sxc + c[:, 1] * Syc)
+                            + (c[:, 0] ** 2 + c[:, 1] ** 2) * W))
+
+    sums = region_sums(labels)
+    energy = [region_energy(sums, sites)]
     empty_total = 0
     converged = False
     it = 0
     lo = np.array([0.0, 0.0])
     hi = np.array([cols - 1.0, rows - 1.0])
     for it in range(1, max_iter + 1):
-        W = np.bincount(labels, w, n)
+        W, Sx, Sy, _ = sums
         empty = W == 0
         empty_total += int(empty.sum())
         Wsafe = np.where(empty, 1.0, W)
-        m = np.column_stack([np.bincount(labels, wx, n), np.bincount(labels, wy, n)]) / Wsafe[:, None]
+        m = np.column_stack([Sx, Sy]) / Wsafe[:, None]
         new = np.where(empty[:, None], sites, m)  # rule 3 (an empty region keeps its site)
         line_now, bary = border_barycentres(labels)
         for k, (_, axis, value) in enumerate(lines):
@@ -230,7 +248,10 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
         move = float(drift.max())
         sites = new
         u = u + drift[labels]
-        l = l - move
+        # any other site came at most the largest drift among the others closer: the
+        # second largest for the pixels whose own site moved most (Hamerly's refinement)
+        top = np.argsort(drift)[-2:] if n > 1 else np.array([0, 0])
+        l = l - np.where(labels == top[-1], drift[top[0]], move)
         check = np.flatnonzero(u > l)
         if len(check):
             own = sites[labels[check]]
@@ -239,7 +260,8 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
         if len(check):
             d, idx = cKDTree(sites).query(px[check], k=2, workers=-1)
             labels[check], u[check], l[check] = idx[:, 0], d[:, 0], d[:, 1]
-        energy.append(_energy(px, w, sites, labels))
+        sums = region_sums(labels)
+        energy.append(region_energy(sums, sites))
         if progress is not None:
             progress(it, max_iter)
         if move < tol:

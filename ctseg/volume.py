@@ -94,17 +94,28 @@ def _sample_slices(n_slices, slice_voxels):
     return np.unique(np.linspace(0, n_slices - 1, n_keep).round().astype(int))
 
 
-def _as_volume(volume):
+def as_volume(volume, name="volume"):
+    """Return ``volume`` as a 3D numeric array (a 2D one as one slice), or raise InputError
+    saying what is wrong. NaN and infinite values are refused here, before any slice runs."""
     try:
         vol = np.asarray(volume)
     except Exception as exc:
-        raise InputError(f"volume: cannot be read as an array ({exc})") from None
+        raise InputError(f"{name}: cannot be read as an array ({exc})") from None
     if vol.ndim == 2:
         vol = vol[None]
     if vol.ndim != 3:
-        raise InputError(f"volume: expected a 3D array (slices, rows, cols), got shape {vol.shape}")
+        raise InputError(f"{name}: expected a 3D array (slices, rows, cols), got shape {vol.shape}")
     if vol.size == 0:
-        raise InputError(f"volume: the array is empty (shape {vol.shape})")
+        raise InputError(f"{name}: the array is empty (shape {vol.shape})")
+    if vol.dtype == object or not (np.issubdtype(vol.dtype, np.number) or vol.dtype == bool) \
+            or np.iscomplexobj(vol):
+        raise InputError(f"{name}: expected real numbers, got dtype {vol.dtype}")
+    if np.issubdtype(vol.dtype, np.floating):
+        bad = ~np.isfinite(vol)
+        if bad.any():
+            k, r, c = np.argwhere(bad)[0]
+            raise InputError(f"{name}: {int(bad.sum())} voxel(s) are NaN or infinite (first in "
+                             f"slice {k}, row {r}, col {c})")
     return vol
 
 
@@ -308,7 +319,7 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
     ParameterError
         Unknown parameter, bad axis, n_jobs < 0.
     """
-    vol = _as_volume(volume)
+    vol = as_volume(volume)
     ax = slice_axis(axis)
     unknown = sorted(set(params) - set(SEGMENT_DEFAULTS))
     if unknown:

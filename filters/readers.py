@@ -464,6 +464,15 @@ def read_image(path, series=None):
         gray value per voxel.
     """
     path = os.fspath(path)
+    try:
+        return _read_any(path, series)
+    except InputError as exc:
+        if path in str(exc):
+            raise
+        raise InputError(f"{path}: {exc}") from None  # e.g. a geometry the file gives
+
+
+def _read_any(path, series):
     if not os.path.exists(path):
         raise InputError(f"{path}: no such file or folder")
     if os.path.isdir(path):
