@@ -12,6 +12,7 @@ from .density import density_map
 from .errors import ParameterError
 from .intensity import estimate_noise, rescale_gray
 from .materials import order_by_gray, pixel_material_levels, segment_triangles
+from .resources import check_memory, slice_bytes
 from .sites import initial_sites
 from .triangle_gray import triangle_gray
 from .triangulation import delaunay_mesh, triangle_areas
@@ -200,6 +201,8 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
             f"n_sites: {n_sites} sites for an image of {img.shape[0]} x {img.shape[1]} = "
             f"{img.size} pixels; use at most {img.size}")
     seed = check_number(seed, "seed", low=0, integer=True)
+    check_memory(slice_bytes(*img.shape), f"segmenting a {img.shape[0]} x {img.shape[1]} slice",
+                 "crop or downsample it")
     if n_materials is not None:  # checked again where used; here to fail before the CVT
         check_number(n_materials, "n_materials", low=1, integer=True)
     times = {}

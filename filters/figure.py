@@ -68,18 +68,19 @@ def _poly_actor(poly, rgb=None, width=1.0, point_size=1.0, lut=None, z=0.01):
     return actor
 
 
-def _mesh_poly(points, triangles, material=None, lines=None):
-    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+def _mesh_poly(points, triangles=None, material=None, lines=None, vertices=False):
+    """Polydata on 2D points (z = 0): triangles (with ``material``), 2-point lines, or one
+    vertex per point."""
+    from vtkmodules.vtkCommonDataModel import vtkPolyData
 
     poly = vtkPolyData()
     poly.SetPoints(_points(np.column_stack([points, np.zeros(len(points))])))
     if triangles is not None:
         poly.SetPolys(_cells(np.asarray(triangles).ravel(), 3))
     if lines is not None:
-        ca = vtkCellArray()
-        ca.SetData(numpy_support.numpy_to_vtkIdTypeArray(np.arange(0, 2 * len(lines) + 1, 2, dtype=np.int64), deep=True),
-                   numpy_support.numpy_to_vtkIdTypeArray(np.asarray(lines, np.int64).ravel(), deep=True))
-        poly.SetLines(ca)
+        poly.SetLines(_cells(np.asarray(lines).ravel(), 2))
+    if vertices:
+        poly.SetVerts(_cells(np.arange(len(points)), 1))
     if material is not None:
         _add_cell_array(poly, np.asarray(material, np.int32), "material")
         poly.GetCellData().SetActiveScalars("material")
@@ -186,17 +187,18 @@ def render_figure(path, image, seg, title=None):
         ("density map", [_image_actor(seg.density, (seg.density.min(), seg.density.max()))]),
         (f"CVT: {len(seg.points)} sites", [
             _image_actor(seg.cvt_labels, lut=_region_lut(n_regions)),
-            _poly_actor(_vertices(seg.points), rgb=(0, 0, 0), point_size=3.0)]),
+            _poly_actor(_mesh_poly(seg.points, vertices=True), rgb=(0, 0, 0), point_size=3.0)]),
         (f"Delaunay: {len(seg.triangles)} triangles", [
             _image_actor(img, (lo, hi)),
-            _poly_actor(_mesh_poly(seg.points, None, lines=edges), rgb=(1.0, 0.25, 0.25))]),
+            _poly_actor(_mesh_poly(seg.points, lines=edges), rgb=(1.0, 0.25, 0.25))]),
         (f"materials: {n_mat}", [
-            _poly_actor(_mesh_poly(seg.points, seg.triangles, seg.material), lut=_palette_lut(n_mat), z=0.0),
-            _poly_actor(_mesh_poly(seg.points, None, lines=edges), rgb=(0, 0, 0), width=0.5)]),
+            _poly_actor(_mesh_poly(seg.points, seg.triangles, seg.material),
+                        lut=_palette_lut(n_mat), z=0.0),
+            _poly_actor(_mesh_poly(seg.points, lines=edges), rgb=(0, 0, 0), width=0.5)]),
         ("material boundaries", [
             _image_actor(img, (lo, hi)),
-            _poly_actor(_mesh_poly(seg.points, None, lines=seg.boundary_edges), rgb=(1.0, 0.15, 0.15),
-                        width=2.0)]),
+            _poly_actor(_mesh_poly(seg.points, lines=seg.boundary_edges),
+                        rgb=(1.0, 0.15, 0.15), width=2.0)]),
     ]
     scale = PANEL_PX / max(rows, cols)
     pw, ph = int(round(cols * scale)), int(round(rows * scale))
@@ -236,7 +238,8 @@ def render_figure(path, image, seg, title=None):
     grab.Update()
     shot = grab.GetOutput()
     dims = shot.GetDimensions()
-    rgb = numpy_support.vtk_to_numpy(shot.GetPointData().GetScalars()).reshape(dims[1], dims[0], -1)[..., :3]
+    rgb = numpy_support.vtk_to_numpy(shot.GetPointData().GetScalars())
+    rgb = rgb.reshape(dims[1], dims[0], -1)[..., :3]
     with atomic_outputs([path]) as (tmp,):
         writer = vtkPNGWriter()
         writer.SetFileName(tmp)
@@ -247,11 +250,3 @@ def render_figure(path, image, seg, title=None):
     window.Finalize()
     return np.ascontiguousarray(rgb[::-1])
 
-
-def _vertices(points):
-    from vtkmodules.vtkCommonDataModel import vtkPolyData
-
-    poly = vtkPolyData()
-    poly.SetPoints(_points(np.column_stack([points, np.zeros(len(points))])))
-    poly.SetVerts(_cells(np.arange(len(points)), 1))
-    return poly

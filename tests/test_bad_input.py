@@ -239,3 +239,20 @@ def test_bad_side_outputs(tmp_path, capsys, flag, name):
     np.save(tmp_path / "in.npy", _disc(16))
     assert_refused(tmp_path, capsys, [tmp_path / "in.npy", "-o", tmp_path / "m.vtp", flag,
                                       tmp_path / name], "unknown output format", name)
+
+
+def test_too_large_for_memory_fails_before_the_work(tmp_path, capsys, monkeypatch):
+    """What cannot fit is refused at once, saying how much it needs and what is there."""
+    import ctseg.resources
+
+    arr = _disc(64)
+    np.save(tmp_path / "in.npy", arr)
+    np.save(tmp_path / "vol.npy", np.stack([arr] * 4))
+    monkeypatch.setattr(ctseg.resources, "available_bytes", lambda: 2 ** 20)  # 1 MiB free
+    assert_refused(tmp_path, capsys, [tmp_path / "in.npy", "-o", tmp_path / "m.vtp"],
+                   "64 x 64 slice needs about", "GiB of memory", "crop or downsample")
+    assert_refused(tmp_path, capsys, [tmp_path / "vol.npy", "-o", tmp_path / "m.vtp", "--jobs", "2"],
+                   "4 x 64 x 64 volume with 2 process(es)", "fewer worker processes")
+    monkeypatch.setattr(ctseg.resources, "available_bytes", lambda: None)  # unknown: no check
+    rc, err = run(tmp_path, capsys, [tmp_path / "in.npy", "-o", tmp_path / "m.vtp", "-q"])
+    assert rc == 0, err

@@ -1,0 +1,47 @@
+"""Memory needed by a job, checked before the work starts: an input that cannot fit fails
+at once with a clear message instead of being killed by the system hours later."""
+import os
+
+from .errors import InputError
+
+SLICE_BYTES_PER_PIXEL = 400
+"""Peak resident memory of :func:`ctseg.segment_image` per pixel of the slice, with margin
+(measured by benchmarks/memory.py; see the README's robustness section)."""
+
+LEVEL_BYTES_PER_VOXEL = 48
+"""Working memory per voxel of the slices that measure a volume's material levels."""
+
+
+def available_bytes():
+    """Memory the system can still give (MemAvailable), or None where unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def slice_bytes(rows, cols):
+    """Estimated peak memory of segmenting one (rows, cols) slice."""
+    return SLICE_BYTES_PER_PIXEL * int(rows) * int(cols)
+
+
+def check_memory(needed, what, hint=""):
+    """Raise InputError when ``needed`` bytes exceed what the system has available.
+
+    Parameters
+    ----------
+    needed : int
+        Estimated peak bytes.
+    what : str
+        What is being done, for the message.
+    hint : str
+        How to need less (e.g. fewer worker processes).
+    """
+    have = available_bytes()
+    if have is not None and needed > have:
+        raise InputError(f"{what} needs about {needed / 2 ** 30:.1f} GiB of memory and "
+                         f"{have / 2 ** 30:.1f} GiB are available{'; ' + hint if hint else ''}")
