@@ -1,4 +1,5 @@
 """Stages 6-7 as a VTK filter: mesh with ``gray`` + image -> one material per triangle."""
+from vtkmodules.util import numpy_support
 from vtkmodules.vtkCommonDataModel import vtkPolyData
 
 from ctseg.errors import InputError
@@ -59,8 +60,6 @@ class GraphCutSegmentFilter(CTSegAlgorithm):
         out.ShallowCopy(mesh_in)
         _add_cell_array(out, labels.material.astype("int32"), "material")
         out.GetCellData().SetActiveScalars("material")
-        from vtkmodules.util import numpy_support
-
         mg = numpy_support.numpy_to_vtk(labels.material_gray, deep=True)
         mg.SetName("material_gray")
         out.GetFieldData().AddArray(mg)

@@ -63,6 +63,17 @@ def _param(key, auto_zero=False):
     return apply
 
 
+def _stage(name, label, *inputs):
+    """Declare a stage filter: its proxy, the ctseg menu, and its inputs as
+    (port name, port index, data type), in port order."""
+    def decorate(cls):
+        for port, index, data_type in inputs:
+            cls = smdomain.datatype(dataTypes=[data_type], composite_data_supported=False)(cls)
+            cls = smproperty.input(name=port, port_index=index)(cls)
+        return smproxy.filter(name=name, label=label)(smhint.xml(MENU)(cls))
+    return decorate
+
+
 @smproxy.filter(name="CTSegment", label="CT Segment")
 @smhint.xml(MENU)
 @smproperty.xml('<OutputPort name="Mesh" index="0"/>')
@@ -141,10 +152,7 @@ class CTSegment(CTSegmentFilter):
                                  lambda self, v: self.SetParameter("weight_by_edge_length", bool(v)))
 
 
-@smproxy.filter(name="CTDensityMap", label="CT Density Map")
-@smhint.xml(MENU)
-@smproperty.input(name="Input", port_index=0)
-@smdomain.datatype(dataTypes=["vtkImageData"], composite_data_supported=False)
+@_stage("CTDensityMap", "CT Density Map", ("Input", 0, "vtkImageData"))
 class CTDensityMap(DensityMapFilter):
     """Stage 1: the gradient density map of a slice, as a 'density' point array."""
 
@@ -160,10 +168,7 @@ class CTDensityMap(DensityMapFilter):
                        DensityMapFilter.SetRidge)
 
 
-@smproxy.filter(name="CTCVTSites", label="CT CVT Sites")
-@smhint.xml(MENU)
-@smproperty.input(name="Input", port_index=0)
-@smdomain.datatype(dataTypes=["vtkImageData"], composite_data_supported=False)
+@_stage("CTCVTSites", "CT CVT Sites", ("Input", 0, "vtkImageData"))
 class CTCVTSites(CVTSitesFilter):
     """Stages 2-3: Ward-initialised CVT of a density map; the sites as vertices."""
 
@@ -179,30 +184,17 @@ class CTCVTSites(CVTSitesFilter):
                                 CVTSitesFilter.SetMaximumIterations)
 
 
-@smproxy.filter(name="CTDelaunayMesh", label="CT Delaunay Mesh")
-@smhint.xml(MENU)
-@smproperty.input(name="Input", port_index=0)
-@smdomain.datatype(dataTypes=["vtkPolyData"], composite_data_supported=False)
+@_stage("CTDelaunayMesh", "CT Delaunay Mesh", ("Input", 0, "vtkPolyData"))
 class CTDelaunayMesh(DelaunayMeshFilter):
     """Stage 4: the Delaunay triangles of the CVT sites."""
 
 
-@smproxy.filter(name="CTTriangleGray", label="CT Triangle Gray")
-@smhint.xml(MENU)
-@smproperty.input(name="Image", port_index=1)
-@smdomain.datatype(dataTypes=["vtkImageData"], composite_data_supported=False)
-@smproperty.input(name="Mesh", port_index=0)
-@smdomain.datatype(dataTypes=["vtkPolyData"], composite_data_supported=False)
+@_stage("CTTriangleGray", "CT Triangle Gray", ("Mesh", 0, "vtkPolyData"), ("Image", 1, "vtkImageData"))
 class CTTriangleGray(TriangleGrayFilter):
     """Stage 5: exact area-weighted mean gray of every triangle over the image."""
 
 
-@smproxy.filter(name="CTGraphCut", label="CT Graph Cut")
-@smhint.xml(MENU)
-@smproperty.input(name="Image", port_index=1)
-@smdomain.datatype(dataTypes=["vtkImageData"], composite_data_supported=False)
-@smproperty.input(name="Mesh", port_index=0)
-@smdomain.datatype(dataTypes=["vtkPolyData"], composite_data_supported=False)
+@_stage("CTGraphCut", "CT Graph Cut", ("Mesh", 0, "vtkPolyData"), ("Image", 1, "vtkImageData"))
 class CTGraphCut(GraphCutSegmentFilter):
     """Stages 6-7: recursive graph cut of the triangles into materials."""
 
@@ -214,9 +206,6 @@ class CTGraphCut(GraphCutSegmentFilter):
                       GraphCutSegmentFilter.SetBeta)
 
 
-@smproxy.filter(name="CTMaterialBoundary", label="CT Material Boundary")
-@smhint.xml(MENU)
-@smproperty.input(name="Input", port_index=0)
-@smdomain.datatype(dataTypes=["vtkPolyData"], composite_data_supported=False)
+@_stage("CTMaterialBoundary", "CT Material Boundary", ("Input", 0, "vtkPolyData"))
 class CTMaterialBoundary(MaterialBoundaryFilter):
     """The edges between materials as polylines with the materials each side."""
