@@ -28,23 +28,25 @@ def _enum(names):
     return smdomain.xml(f'<EnumerationDomain name="enum">{entries}</EnumerationDomain>')
 
 
-def _int(name, default, low, high, doc, apply):
-    """An integer property calling ``apply(self, value)``."""
-    @smproperty.intvector(name=name, command=f"Set{name}", default_values=[default])
-    @smdomain.intrange(min=low, max=high)
+def _number(kind, name, default, low, high, doc, apply):
+    """An int or float property with a range, calling ``apply(self, value)``."""
+    vector, domain = ((smproperty.intvector, smdomain.intrange) if kind is int
+                      else (smproperty.doublevector, smdomain.doublerange))
+
+    @vector(name=name, command=f"Set{name}", default_values=[default])
+    @domain(min=low, max=high)
     @_doc(doc)
     def setter(self, value):
-        apply(self, int(value))
+        apply(self, kind(value))
     return setter
 
 
-def _double(name, default, low, high, doc, apply):
-    @smproperty.doublevector(name=name, command=f"Set{name}", default_values=[default])
-    @smdomain.doublerange(min=low, max=high)
-    @_doc(doc)
-    def setter(self, value):
-        apply(self, float(value))
-    return setter
+def _int(*args):
+    return _number(int, *args)
+
+
+def _double(*args):
+    return _number(float, *args)
 
 
 def _choice(name, names, default, doc, apply):
