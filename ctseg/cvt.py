@@ -2,7 +2,7 @@
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
+from numba import njit
 
 from ._validate import check_number
 from .errors import InputError, ParameterError
@@ -38,7 +38,23 @@ class CVTResult:
 
 def nearest_site(points, sites):
     """Index of the nearest site for each point (Euclidean; ties go to the lower index)."""
-    return cKDTree(sites).query(points, k=1, workers=-1)[1]
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    sites = np.ascontiguousarray(sites, dtype=np.float64).reshape(-1, 2)
+    if len(sites) == 0:
+        raise InputError("sites: need at least one site")
+    lo = np.minimum(points.min(axis=0, initial=np.inf), sites.min(axis=0))
+    return _nearest_many(points - lo, sites - lo)
+
+
+@njit(cache=True)
+def _nearest_many(points, sites):
+    width = max(points[:, 0].max(), sites[:, 0].max()) if points.shape[0] else sites[:, 0].max()
+    height = max(points[:, 1].max(), sites[:, 1].max()) if points.shape[0] else sites[:, 1].max()
+    h, gx, gy, start, items = _site_grid(sites, width, height)
+    out = np.empty(points.shape[0], np.int64)
+    for i in range(points.shape[0]):
+        out[i] = _two_nearest(points[i, 0], points[i, 1], sites, h, gx, gy, start, items)[0]
+    return out
 
 
 def pixel_centres(shape):
@@ -145,32 +161,32 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
             or sites[:, 1].min() < 0 or sites[:, 1].max() > rows - 1):
         raise InputError("sites: every site must lie inside the image (0..cols-1, 0..rows-1)")
 
-    px = pixel_centres(rho.shape)
-    xr, yr = px[:, 0], px[:, 1]
-    w = rho.ravel()
-    wx, wy = w * px[:, 0], w * px[:, 1]
+    w = np.ascontiguousarray(rho.ravel())
     sites, corner_sites = _pin_corners(sites, rho.shape)
+    sites = np.ascontiguousarray(sites)
 
-    # Border lines (corners excluded: rule 1 owns them): (pixel indices, axis held fixed, value)
-    inner_x = (xr > 0) & (xr < cols - 1)
-    inner_y = (yr > 0) & (yr < rows - 1)
-    lines = [(np.flatnonzero((yr == 0) & inner_x), 1, 0.0),
-             (np.flatnonzero((yr == rows - 1) & inner_x), 1, rows - 1.0),
-             (np.flatnonzero((xr == 0) & inner_y), 0, 0.0),
-             (np.flatnonzero((xr == cols - 1) & inner_y), 0, cols - 1.0)]
+    # Border lines (corners excluded: rule 1 owns them): pixel indices, their weights and
+    # weighted coordinates, the axis held fixed and its value
+    inner_c = np.arange(1, cols - 1)
+    inner_r = np.arange(1, rows - 1)
+    lines = []
+    for idx, axis, value in ((inner_c, 1, 0.0), ((rows - 1) * cols + inner_c, 1, rows - 1.0),
+                             (inner_r * cols, 0, 0.0), (inner_r * cols + cols - 1, 0, cols - 1.0)):
+        y, x = np.divmod(idx, cols)
+        lines.append((idx, w[idx], w[idx] * x, w[idx] * y, axis, value))
 
     def border_barycentres(labels):
         """Per site: the line carrying most of its region's border weight, and eq. (6) there."""
         best_w = np.zeros(n)
         best_line = np.full(n, -1)
         bary = np.zeros((n, 2))
-        for k, (idx, axis, value) in enumerate(lines):
+        for k, (idx, wl, wxl, wyl, axis, value) in enumerate(lines):
             lab = labels[idx]
-            bw = np.bincount(lab, w[idx], n)
+            bw = np.bincount(lab, wl, n)
             better = bw > best_w
             if better.any():
-                bary[better, 0] = np.bincount(lab, wx[idx], n)[better] / bw[better]
-                bary[better, 1] = np.bincount(lab, wy[idx], n)[better] / bw[better]
+                bary[better, 0] = np.bincount(lab, wxl, n)[better] / bw[better]
+                bary[better, 1] = np.bincount(lab, wyl, n)[better] / bw[better]
                 bary[better, axis] = value  # exactly on the line, not value * w / w
                 best_w[better] = bw[better]
                 best_line[better] = k
@@ -180,7 +196,10 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
     # 0..3 on that border line (rule 2), -1 free (rule 3). Keeping the classes fixed is what
     # makes the energy provably non-increasing; re-deciding them every iteration moves
     # sites from the interior onto the border and raises F.
-    labels = nearest_site(px, sites)
+    labels = np.empty(rows * cols, np.int64)
+    u = np.empty(rows * cols)
+    l = np.empty(rows * cols)
+    _assign(rows, cols, sites, labels, u, l)
     constraint = np.full(n, -1)
     line0, bary0 = border_barycentres(labels)
     on = line0 >= 0
@@ -191,20 +210,14 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
     if len(np.unique(sites, axis=0)) != n:
         raise InputError("sites: two starting sites coincide after snapping to the border")
 
-    # Hamerly's bounds: u >= distance to the own site, l <= distance to any other site.
-    # A pixel can change region only where u > l, so only those are re-queried; the
-    # assignment stays exactly the nearest site (the energy argument needs that).
-    d, idx = cKDTree(sites).query(px, k=2, workers=-1)
-    labels, u, l = idx[:, 0], d[:, 0], d[:, 1]
+    # Hamerly's bounds (see _reassign): only pixels whose nearest site may have changed are
+    # searched again, and the assignment stays exactly the nearest site (the energy
+    # argument needs that).
+    _assign(rows, cols, sites, labels, u, l)
     # F from per-region sums: sum_j w|p_j - s|^2 = Q - 2 s.S + |s|^2 W over each region,
     # with coordinates taken about the image centre to keep the cancellation small;
     # the same sums give the centroids of the next iteration
     centre = np.array([(cols - 1) / 2.0, (rows - 1) / 2.0])
-    q = w * ((xr - centre[0]) ** 2 + (yr - centre[1]) ** 2)
-
-    def region_sums(labels):
-        return (np.bincount(labels, w, n), np.bincount(labels, wx, n),
-                np.bincount(labels, wy, n), np.bincount(labels, q, n))
 
     def region_energy(sums, sites):
         W, Sx, Sy, Q = sums
@@ -213,7 +226,7 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
         return float(np.sum(Q - 2.0 * (c[:, 0] * Sxc + c[:, 1] * Syc)
                             + (c[:, 0] ** 2 + c[:, 1] ** 2) * W))
 
-    sums = region_sums(labels)
+    sums = _region_sums(labels, w, n, rows, cols, centre[0], centre[1])
     energy = [region_energy(sums, sites)]
     empty_total = 0
     converged = False
@@ -228,7 +241,7 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
         m = np.column_stack([Sx, Sy]) / Wsafe[:, None]
         new = np.where(empty[:, None], sites, m)  # rule 3 (an empty region keeps its site)
         line_now, bary = border_barycentres(labels)
-        for k, (_, axis, value) in enumerate(lines):
+        for k, (_, _, _, _, axis, value) in enumerate(lines):
             sel = np.flatnonzero((constraint == k) & ~empty)
             if len(sel) == 0:
                 continue
@@ -246,21 +259,8 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
         new[constraint == -2] = sites[constraint == -2]  # rule 1: corners never move
         drift = np.hypot(*(new - sites).T)
         move = float(drift.max())
-        sites = new
-        u = u + drift[labels]
-        # any other site came at most the largest drift among the others closer: the
-        # second largest for the pixels whose own site moved most (Hamerly's refinement)
-        top = np.argsort(drift)[-2:] if n > 1 else np.array([0, 0])
-        l = l - np.where(labels == top[-1], drift[top[0]], move)
-        check = np.flatnonzero(u > l)
-        if len(check):
-            own = sites[labels[check]]
-            u[check] = np.hypot(px[check, 0] - own[:, 0], px[check, 1] - own[:, 1])
-            check = check[u[check] > l[check]]
-        if len(check):
-            d, idx = cKDTree(sites).query(px[check], k=2, workers=-1)
-            labels[check], u[check], l[check] = idx[:, 0], d[:, 0], d[:, 1]
-        sums = region_sums(labels)
+        old, sites = sites, np.ascontiguousarray(new)
+        sums, _ = _reassign(rows, cols, old, sites, drift, labels, u, l, w, centre[0], centre[1])
         energy.append(region_energy(sums, sites))
         if progress is not None:
             progress(it, max_iter)
@@ -269,3 +269,236 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
             break
     return CVTResult(sites=sites, labels=labels.reshape(rows, cols), energy=energy,
                      n_iter=it, converged=converged, empty_regions=empty_total)
+
+
+# --- compiled kernels (numba): profiling showed Lloyd's per-iteration pixel passes
+# (bound updates, KD-tree re-queries, region sums) at 3.0 of 5.0 s for 512 x 512 /
+# 1000 sites in numpy; one fused pass per iteration does the same work exactly.
+
+
+@njit(cache=True)
+def _site_grid(sites, width, height):
+    """Bucket the sites into a uniform grid of about one site per cell."""
+    n = sites.shape[0]
+    h = max(np.sqrt(max(width, 1.0) * max(height, 1.0) / n), 1e-9)
+    gx = int(width / h) + 1
+    gy = int(height / h) + 1
+    cell = np.empty(n, np.int64)
+    for k in range(n):
+        cx = min(max(int(sites[k, 0] / h), 0), gx - 1)
+        cy = min(max(int(sites[k, 1] / h), 0), gy - 1)
+        cell[k] = cy * gx + cx
+    start = np.zeros(gx * gy + 1, np.int64)
+    for k in range(n):
+        start[cell[k] + 1] += 1
+    for c in range(gx * gy):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    items = np.empty(n, np.int64)
+    for k in range(n):  # ascending k within each cell
+        items[fill[cell[k]]] = k
+        fill[cell[k]] += 1
+    return h, gx, gy, start, items
+
+
+@njit(cache=True)
+def _two_nearest(x, y, sites, h, gx, gy, start, items):
+    """Nearest and second-nearest site of (x, y) and their distances, exactly.
+
+    Ties go to the lower site index, so the answer does not depend on the visiting order.
+    Cells are visited in square rings around the point's cell until the ring's inner
+    distance exceeds the second-best distance.
+    """
+    cx = min(max(int(x / h), 0), gx - 1)
+    cy = min(max(int(y / h), 0), gy - 1)
+    b1 = np.inf
+    b2 = np.inf
+    i1 = -1
+    i2 = -1
+    r = 0
+    while True:
+        for yy in range(cy - r, cy + r + 1):
+            if yy < 0 or yy >= gy:
+                continue
+            edge_row = yy == cy - r or yy == cy + r
+            step = 1 if edge_row else 2 * r
+            xx = cx - r
+            while xx <= cx + r:
+                if 0 <= xx < gx:
+                    c = yy * gx + xx
+                    for t in range(start[c], start[c + 1]):
+                        k = items[t]
+                        dx = sites[k, 0] - x
+                        dy = sites[k, 1] - y
+                        d = dx * dx + dy * dy
+                        if d < b1 or (d == b1 and k < i1):
+                            b2 = b1
+                            i2 = i1
+                            b1 = d
+                            i1 = k
+                        elif d < b2 or (d == b2 and k < i2):
+                            b2 = d
+                            i2 = k
+                xx += step
+        # distance from the point to the cells not yet visited
+        m = np.inf
+        done = True
+        if cx - r > 0:
+            m = min(m, x - (cx - r) * h)
+            done = False
+        if cx + r < gx - 1:
+            m = min(m, (cx + r + 1) * h - x)
+            done = False
+        if cy - r > 0:
+            m = min(m, y - (cy - r) * h)
+            done = False
+        if cy + r < gy - 1:
+            m = min(m, (cy + r + 1) * h - y)
+            done = False
+        if done or (i2 >= 0 and m > 0 and m * m >= b2):
+            break
+        r += 1
+    return i1, np.sqrt(b1), i2, np.sqrt(b2)
+
+
+@njit(cache=True)
+def _assign(rows, cols, sites, labels, u, l):
+    """Exact nearest (labels, u) and second-nearest distance (l) of every pixel centre."""
+    h, gx, gy, start, items = _site_grid(sites, cols - 1.0, rows - 1.0)
+    for i in range(rows * cols):
+        y, x = divmod(i, cols)
+        i1, d1, _, d2 = _two_nearest(float(x), float(y), sites, h, gx, gy, start, items)
+        labels[i] = i1
+        u[i] = d1
+        l[i] = d2
+
+
+@njit(cache=True)
+def _region_sums(labels, w, n, rows, cols, cx, cy):
+    """Per region: weight W, weighted coordinate sums Sx, Sy, and Q = sum w |p - centre|^2."""
+    sums = np.zeros((4, n))
+    for y in range(rows):
+        dy = y - cy
+        for x in range(cols):
+            i = y * cols + x
+            k = labels[i]
+            wi = w[i]
+            sums[0, k] += wi
+            sums[1, k] += wi * x
+            sums[2, k] += wi * y
+            dx = x - cx
+            sums[3, k] += wi * (dx * dx + dy * dy)
+    return sums
+
+
+@njit(cache=True)
+def _local_drift(old_sites, drift, h, gx, gy, reach):
+    """Per grid cell: the largest drift, its site, and the second largest drift among the
+    sites that started within `reach` cells of it (Chebyshev)."""
+    top1 = np.zeros(gx * gy)
+    top1_site = np.full(gx * gy, -1)
+    top2 = np.zeros(gx * gy)
+    for k in range(old_sites.shape[0]):
+        cx = min(max(int(old_sites[k, 0] / h), 0), gx - 1)
+        cy = min(max(int(old_sites[k, 1] / h), 0), gy - 1)
+        c = cy * gx + cx
+        if drift[k] > top1[c]:
+            top2[c] = top1[c]
+            top1[c] = drift[k]
+            top1_site[c] = k
+        elif drift[k] > top2[c]:
+            top2[c] = drift[k]
+    b1 = np.zeros(gx * gy)
+    b1_site = np.full(gx * gy, -1)
+    b2 = np.zeros(gx * gy)
+    for cy in range(gy):
+        for cx in range(gx):
+            m1 = 0.0
+            s1 = -1
+            m2 = 0.0
+            for yy in range(max(cy - reach, 0), min(cy + reach + 1, gy)):
+                for xx in range(max(cx - reach, 0), min(cx + reach + 1, gx)):
+                    c = yy * gx + xx
+                    if top1[c] > m1:
+                        m2 = max(m1, top2[c])
+                        m1 = top1[c]
+                        s1 = top1_site[c]
+                    else:
+                        m2 = max(m2, top1[c])
+            b1[cy * gx + cx] = m1
+            b1_site[cy * gx + cx] = s1
+            b2[cy * gx + cx] = m2
+    return b1, b1_site, b2
+
+
+@njit(cache=True)
+def _reach_margin(size, h, g, reach):
+    """Per pixel coordinate: distance to the edge of the block of cells within `reach` of
+    its cell, on the sides where the grid goes on (infinite where it does not)."""
+    out = np.empty(size)
+    for x in range(size):
+        c = min(int(x / h), g - 1)
+        m = np.inf
+        if c - reach > 0:
+            m = min(m, x - (c - reach) * h)
+        if c + reach < g - 1:
+            m = min(m, (c + reach + 1) * h - x)
+        out[x] = m
+    return out
+
+
+_REACH = 2  # cells: sites farther than this cannot come near a pixel within one iteration
+
+
+@njit(cache=True)
+def _reassign(rows, cols, old_sites, sites, drift, labels, u, l, w, cx, cy):
+    """Hamerly's step after the sites moved by `drift`: re-find only pixels whose bounds fail.
+
+    u >= distance to the own site, l <= distance to any other site. A site that started
+    within _REACH grid cells of the pixel's cell came at most the largest drift among
+    those sites closer (the second largest if the largest is the pixel's own site); any
+    other site is at least the block's margin minus the largest drift overall away. Most
+    sites stop moving long before the last ones, so these local bounds fail far less
+    often than Hamerly's global one. Returns the region sums of the new regions (as
+    :func:`_region_sums`, in the same pass) and the number of pixels searched.
+    """
+    h, gx, gy, start, items = _site_grid(sites, cols - 1.0, rows - 1.0)
+    b1, b1_site, b2 = _local_drift(old_sites, drift, h, gx, gy, _REACH)
+    far = drift.max()
+    mx = _reach_margin(cols, h, gx, _REACH)
+    my = _reach_margin(rows, h, gy, _REACH)
+    cell_x = np.empty(cols, np.int64)
+    for x in range(cols):
+        cell_x[x] = min(int(x / h), gx - 1)
+    searched = 0
+    sums = np.zeros((4, sites.shape[0]))
+    for y in range(rows):
+        row_cell = min(int(y / h), gy - 1) * gx
+        ry = y - cy
+        for x in range(cols):
+            i = y * cols + x
+            c = row_cell + cell_x[x]
+            k = labels[i]
+            ui = u[i] + drift[k]
+            li = min(l[i] - (b2[c] if k == b1_site[c] else b1[c]), min(mx[x], my[y]) - far)
+            if ui > li:
+                dx = sites[k, 0] - x
+                dy = sites[k, 1] - y
+                ui = np.sqrt(dx * dx + dy * dy)
+                if ui > li:
+                    i1, d1, _, d2 = _two_nearest(float(x), float(y), sites, h, gx, gy, start,
+                                                 items)
+                    labels[i] = i1
+                    ui = d1
+                    li = d2
+                    searched += 1
+            u[i] = ui
+            l[i] = li
+            k = labels[i]
+            wi = w[i]
+            sums[0, k] += wi
+            sums[1, k] += wi * x
+            sums[2, k] += wi * y
+            rx = x - cx
+            sums[3, k] += wi * (rx * rx + ry * ry)
+    return sums, searched

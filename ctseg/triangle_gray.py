@@ -1,5 +1,6 @@
 """Stage 5: exact area-weighted gray value of each triangle (paper 6, SPEC 5)."""
 import numpy as np
+from numba import njit
 
 from ._validate import as_image
 from .errors import InputError
@@ -7,54 +8,15 @@ from .errors import InputError
 _MAXV = 8  # a triangle clipped by 4 half-planes has at most 7 vertices
 
 
-def _clip_halfplane(P, n, axis, bound, keep_greater):
-    """Sutherland-Hodgman clip of many convex polygons against one axis-aligned line.
-
-    P: (N, M, 2) vertices, n: (N,) counts. Keeps the side coord >= bound (or <= bound).
-    """
-    N, M, _ = P.shape
-    bound = np.asarray(bound, float).reshape(-1, 1)
-    i = np.arange(M)
-    valid = i[None, :] < n[:, None]
-    nxt_idx = (i[None, :] + 1) % np.maximum(n, 1)[:, None]
-    Q = np.take_along_axis(P, nxt_idx[:, :, None], axis=1)
-    sgn = 1.0 if keep_greater else -1.0
-    sc = (P[:, :, axis] - bound) * sgn
-    sn = (Q[:, :, axis] - bound) * sgn
-    inc, inn = sc >= 0, sn >= 0
-    denom = np.where(sc != sn, sc - sn, 1.0)
-    t = sc / denom
-    X = P + t[:, :, None] * (Q - P)
-    X[:, :, axis] = bound  # exact on the clip line (bound broadcasts per polygon)
-    out = np.empty((N, 2 * M, 2))
-    out[:, 0::2] = P
-    out[:, 1::2] = X
-    keep = np.empty((N, 2 * M), bool)
-    keep[:, 0::2] = valid & inc
-    keep[:, 1::2] = valid & (inc != inn)
-    order = np.argsort(~keep, axis=1, kind="stable")
-    out = np.take_along_axis(out, order[:, :, None], axis=1)[:, :_MAXV]
-    return out, keep.sum(axis=1)
-
-
-def _polygon_area(P, n):
-    M = P.shape[1]
-    i = np.arange(M)
-    nxt_idx = (i[None, :] + 1) % np.maximum(n, 1)[:, None]
-    Q = np.take_along_axis(P, nxt_idx[:, :, None], axis=1)
-    cross = P[:, :, 0] * Q[:, :, 1] - Q[:, :, 0] * P[:, :, 1]
-    cross = np.where(i[None, :] < n[:, None], cross, 0.0)
-    return 0.5 * np.abs(cross.sum(axis=1))
-
-
-def pixel_overlaps(points, triangles, shape, chunk=400_000):
+def pixel_overlaps(points, triangles, shape):
     """Exact areas of every (triangle, pixel) overlap.
 
     The domain is the rectangle spanned by the pixel centres, [0, cols-1] x [0, rows-1]
     (the CVT pins sites to the corner pixel centres, SPEC 3), so each pixel's square
     [c-0.5, c+0.5] x [r-0.5, r+0.5] is first clipped to it: border pixels count half,
-    corner pixels a quarter. Fully covered pixels are found by a corner test; only pixels
-    cut by a triangle edge are clipped exactly (Sutherland-Hodgman, vectorised).
+    corner pixels a quarter. Pixels whose square lies inside the triangle (corner test)
+    count whole; only pixels cut by a triangle edge are clipped exactly
+    (Sutherland-Hodgman).
 
     Parameters
     ----------
@@ -63,8 +25,6 @@ def pixel_overlaps(points, triangles, shape, chunk=400_000):
     triangles : (m, 3) int array_like
         Counter-clockwise triangles.
     shape : (rows, cols)
-    chunk : int
-        Candidate pairs processed at once (bounds memory).
 
     Returns
     -------
@@ -73,58 +33,129 @@ def pixel_overlaps(points, triangles, shape, chunk=400_000):
     area : (k,) float64 ndarray
         Overlap area in pixel units (> 0).
     """
+    P = _corners(points, triangles)
     rows, cols = int(shape[0]), int(shape[1])
-    pts = np.asarray(points, float)
-    tri = np.asarray(triangles, np.int64)
-    P = pts[tri]  # (m, 3, 2)
-    lo = np.clip(np.ceil(P.min(axis=1) - 0.5).astype(np.int64), 0, [cols - 1, rows - 1])
-    hi = np.clip(np.floor(P.max(axis=1) + 0.5).astype(np.int64), 0, [cols - 1, rows - 1])
-    nx = hi[:, 0] - lo[:, 0] + 1
-    ny = hi[:, 1] - lo[:, 1] + 1
-    counts = nx * ny
-    # edge normals: inside when cross(b - a, p - a) >= 0 (counter-clockwise)
-    A = P
-    B = P[:, [1, 2, 0]]
-    out_t, out_p, out_a = [], [], []
-    starts = np.concatenate([[0], np.cumsum(counts)])
-    total = int(starts[-1])
-    tri_of = np.repeat(np.arange(len(tri)), counts)
-    for s in range(0, total, chunk):
-        e = min(total, s + chunk)
-        t = tri_of[s:e]
-        k = np.arange(s, e) - starts[t]
-        c = lo[t, 0] + k % nx[t]
-        r = lo[t, 1] + k // nx[t]
-        x0 = np.maximum(c - 0.5, 0.0)
-        x1 = np.minimum(c + 0.5, cols - 1.0)
-        y0 = np.maximum(r - 0.5, 0.0)
-        y1 = np.minimum(r + 0.5, rows - 1.0)
-        cx = np.stack([x0, x1, x1, x0], axis=1)  # (N, 4) square corners
-        cy = np.stack([y0, y0, y1, y1], axis=1)
-        a, b = A[t], B[t]  # (N, 3, 2)
-        ex = (b[:, :, 0] - a[:, :, 0])[:, :, None]
-        ey = (b[:, :, 1] - a[:, :, 1])[:, :, None]
-        side = ex * (cy[:, None, :] - a[:, :, 1, None]) - ey * (cx[:, None, :] - a[:, :, 0, None])
-        inside_all = np.all(side >= 0, axis=(1, 2))
-        outside_any = np.any(np.all(side <= 0, axis=2), axis=1) & ~inside_all
-        area = np.where(inside_all, (x1 - x0) * (y1 - y0), 0.0)
-        cut = ~inside_all & ~outside_any
-        if cut.any():
-            idx = np.flatnonzero(cut)
-            poly = np.zeros((len(idx), _MAXV, 2))
-            poly[:, :3] = P[t[idx]]
-            cnt = np.full(len(idx), 3)
-            poly, cnt = _clip_halfplane(poly, cnt, 0, x0[idx], True)
-            poly, cnt = _clip_halfplane(poly, cnt, 0, x1[idx], False)
-            poly, cnt = _clip_halfplane(poly, cnt, 1, y0[idx], True)
-            poly, cnt = _clip_halfplane(poly, cnt, 1, y1[idx], False)
-            area[idx] = np.where(cnt >= 3, _polygon_area(poly, cnt), 0.0)
-        keep = area > 0
-        out_t.append(t[keep])
-        out_p.append((r * cols + c)[keep])
-        out_a.append(area[keep])
-    return np.concatenate(out_t), np.concatenate(out_p), np.concatenate(out_a)
+    empty = np.zeros(0)
+    k = _overlaps(P, rows, cols, empty, np.zeros(0, np.int64), np.zeros(0, np.int64), empty,
+                  empty, empty)
+    t, p, a = np.empty(k, np.int64), np.empty(k, np.int64), np.empty(k)
+    _overlaps(P, rows, cols, empty, t, p, a, empty, empty)
+    return t, p, a
 
+
+def _corners(points, triangles):
+    pts = np.asarray(points, float)
+    return np.ascontiguousarray(pts[np.asarray(triangles, np.int64)])  # (m, 3, 2)
+
+
+# Compiled (numba): the vectorised clipping cost 1.2 of 5.0 s end to end at 512 x 512 /
+# 1000 sites, mostly sorting and gathering fixed-size vertex arrays.
+@njit(cache=True)
+def _clip_area(P, x0, x1, y0, y1):
+    """Area of triangle P (3, 2) inside the box [x0, x1] x [y0, y1] (Sutherland-Hodgman)."""
+    ax = np.empty(_MAXV)
+    ay = np.empty(_MAXV)
+    bx = np.empty(_MAXV)
+    by = np.empty(_MAXV)
+    for v in range(3):
+        ax[v] = P[v, 0]
+        ay[v] = P[v, 1]
+    n = 3
+    for side in range(4):
+        axis = side // 2  # 0: x, 1: y
+        bound = (x0, x1, y0, y1)[side]
+        sgn = 1.0 if side % 2 == 0 else -1.0  # keep coord >= bound, then <= bound
+        m = 0
+        for v in range(n):
+            w = (v + 1) % n
+            pc = ax[v] if axis == 0 else ay[v]
+            pn = ax[w] if axis == 0 else ay[w]
+            sc = (pc - bound) * sgn
+            sn = (pn - bound) * sgn
+            if sc >= 0:
+                bx[m] = ax[v]
+                by[m] = ay[v]
+                m += 1
+            if (sc >= 0) != (sn >= 0):
+                t = sc / (sc - sn)
+                if axis == 0:
+                    bx[m] = bound
+                    by[m] = ay[v] + t * (ay[w] - ay[v])
+                else:
+                    bx[m] = ax[v] + t * (ax[w] - ax[v])
+                    by[m] = bound
+                m += 1
+        n = m
+        if n < 3:
+            return 0.0
+        for v in range(n):
+            ax[v] = bx[v]
+            ay[v] = by[v]
+    s = 0.0
+    for v in range(n):
+        w = (v + 1) % n
+        s += ax[v] * ay[w] - ax[w] * ay[v]
+    return 0.5 * abs(s)
+
+
+@njit(cache=True)
+def _overlaps(P, rows, cols, img, t_out, p_out, a_out, area, weighted):
+    """Visit every (triangle, pixel) overlap of positive area.
+
+    With an image: add each overlap's area to ``area`` and area x gray to ``weighted``.
+    Else, with output arrays of the right length: fill them; else only count. Returns the
+    number of overlaps.
+    """
+    fill = t_out.shape[0] > 0
+    count = 0
+    for t in range(P.shape[0]):
+        lo_c = min(max(int(np.ceil(min(P[t, 0, 0], P[t, 1, 0], P[t, 2, 0]) - 0.5)), 0), cols - 1)
+        hi_c = min(max(int(np.floor(max(P[t, 0, 0], P[t, 1, 0], P[t, 2, 0]) + 0.5)), 0), cols - 1)
+        lo_r = min(max(int(np.ceil(min(P[t, 0, 1], P[t, 1, 1], P[t, 2, 1]) - 0.5)), 0), rows - 1)
+        hi_r = min(max(int(np.floor(max(P[t, 0, 1], P[t, 1, 1], P[t, 2, 1]) + 0.5)), 0), rows - 1)
+        for r in range(lo_r, hi_r + 1):
+            y0 = max(r - 0.5, 0.0)
+            y1 = min(r + 0.5, rows - 1.0)
+            for c in range(lo_c, hi_c + 1):
+                x0 = max(c - 0.5, 0.0)
+                x1 = min(c + 0.5, cols - 1.0)
+                # edge functions at the square's corners: inside when cross(b - a, p - a) >= 0
+                inside = True
+                outside = False
+                for e in range(3):
+                    ex = P[t, (e + 1) % 3, 0] - P[t, e, 0]
+                    ey = P[t, (e + 1) % 3, 1] - P[t, e, 1]
+                    n_in = 0
+                    n_out = 0
+                    for q in range(4):
+                        qx = x0 if q == 0 or q == 3 else x1
+                        qy = y0 if q < 2 else y1
+                        s = ex * (qy - P[t, e, 1]) - ey * (qx - P[t, e, 0])
+                        if s >= 0:
+                            n_in += 1
+                        if s <= 0:
+                            n_out += 1
+                    if n_in < 4:
+                        inside = False
+                    if n_out == 4:
+                        outside = True
+                if inside:
+                    a = (x1 - x0) * (y1 - y0)
+                elif outside:
+                    continue
+                else:
+                    a = _clip_area(P[t], x0, x1, y0, y1)
+                if a <= 0:
+                    continue
+                if img.shape[0] > 0:
+                    area[t] += a
+                    weighted[t] += a * img[r * cols + c]
+                elif fill:
+                    t_out[count] = t
+                    p_out[count] = r * cols + c
+                    a_out[count] = a
+                count += 1
+    return count
 
 
 def triangle_gray(image, points, triangles):
@@ -165,9 +196,11 @@ def triangle_gray(image, points, triangles):
     if (pts[:, 0].min() < -1e-9 or pts[:, 0].max() > cols - 1 + 1e-9
             or pts[:, 1].min() < -1e-9 or pts[:, 1].max() > rows - 1 + 1e-9):
         raise InputError("points: mesh vertices must lie inside the image domain")
-    t, p, a = pixel_overlaps(pts, triangles, img.shape)
-    m = len(triangles)
-    area = np.bincount(t, a, m)
+    P = _corners(pts, triangles)
+    area = np.zeros(len(P))
+    weighted = np.zeros(len(P))
+    _overlaps(P, rows, cols, np.ascontiguousarray(img.ravel()), np.zeros(0, np.int64),
+              np.zeros(0, np.int64), np.zeros(0), area, weighted)
     if np.any(area <= 0):
         raise InputError("triangles: a triangle covers no image area (degenerate?)")
-    return np.bincount(t, a * img.ravel()[p], m) / area
+    return weighted / area

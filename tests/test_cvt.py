@@ -13,13 +13,24 @@ def brute_nearest_dist(points, sites):
     return d.min(axis=1)
 
 
-def test_nearest_site_matches_brute_force():
+@pytest.mark.parametrize("layout", ["uniform", "clustered", "integer"])
+def test_nearest_site_matches_brute_force(layout):
     rng = np.random.default_rng(0)
-    pts = rng.uniform(0, 50, (2000, 2))
-    sites = rng.uniform(0, 50, (60, 2))
+    pts = rng.uniform(-5, 55, (3000, 2))
+    if layout == "uniform":
+        sites = rng.uniform(0, 50, (60, 2))
+    elif layout == "clustered":  # dense near a line, sparse elsewhere (as CVT sites are)
+        sites = np.vstack([np.column_stack([rng.uniform(0, 50, 200), 25 + rng.normal(0, 0.3, 200)]),
+                           rng.uniform(0, 50, (10, 2))])
+    else:  # pixel-centre sites and points: many exact ties
+        sites = rng.choice(51, (40, 2)).astype(float)
+        sites = np.unique(sites, axis=0)
+        pts = rng.choice(51, (3000, 2)).astype(float)
     lab = nearest_site(pts, sites)
-    d = np.hypot(*(pts - sites[lab]).T)
-    np.testing.assert_allclose(d, brute_nearest_dist(pts, sites), atol=1e-12)
+    d_all = np.sqrt(((pts[:, None, :] - sites[None, :, :]) ** 2).sum(-1))
+    np.testing.assert_allclose(d_all[np.arange(len(pts)), lab], d_all.min(axis=1), atol=1e-12)
+    # ties go to the lower index: the first site at the minimum distance
+    assert np.array_equal(lab, np.argmin(d_all, axis=1))
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ if [ ! -x "$env/bin/python" ]; then
     /usr/bin/python3 -m venv --system-site-packages "$env"
 fi
 numpy_version=$(/usr/bin/python3 -c 'import numpy; print(numpy.__version__)')
-"$env/bin/pip" install -q "numpy==$numpy_version" PyMaxflow pymeshlab pydicom pynrrd tifffile
+"$env/bin/pip" install -q "numpy==$numpy_version" numba PyMaxflow pymeshlab pydicom pynrrd tifffile
 "$env/bin/pip" install -q --no-deps --force-reinstall .
 site=$("$env/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
 shot=${1:-$(mktemp -d)/paraview.png}
