@@ -4,9 +4,14 @@ import os
 
 from .errors import InputError
 
-SLICE_BYTES_PER_PIXEL = 400
-"""Peak resident memory of :func:`ctseg.segment_image` per pixel of the slice, with margin
-(measured by benchmarks/memory.py; see the README's robustness section)."""
+SLICE_BYTES_PER_PIXEL = 160
+"""Peak resident memory of :func:`ctseg.segment_image` per pixel of the slice, with a 2x
+margin: benchmarks/memory.py measured 79 and 70 bytes per pixel above the process's
+starting memory at 2048^2 and 4096^2 (see the README's robustness section)."""
+
+RESULT_BYTES_PER_VOXEL = 24
+"""Memory that a volume's finished slice meshes hold, per voxel, with a 2x margin (13
+measured on a 512^3 volume: 2.0 million triangles)."""
 
 LEVEL_BYTES_PER_VOXEL = 48
 """Working memory per voxel of the slices that measure a volume's material levels."""

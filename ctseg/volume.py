@@ -11,7 +11,8 @@ from ._validate import as_image, check_number
 from .errors import CTSegError, InputError, ParameterError, ResumeError
 from .intensity import gray_scale
 from .pipeline import SEGMENT_DEFAULTS, SegmentedMesh, material_levels, segment_image
-from .resources import LEVEL_BYTES_PER_VOXEL, check_memory, slice_bytes
+from .resources import (LEVEL_BYTES_PER_VOXEL, RESULT_BYTES_PER_VOXEL, check_memory,
+                        slice_bytes)
 
 AXES = {"z": 0, "y": 1, "x": 2}
 """Slice axis name -> axis of the (nz, ny, nx) array (VTK's k, j, i)."""
@@ -333,7 +334,7 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
     workers = 1 if client is not None else min(n_jobs, n_slices)
     slice_shape = [d for a, d in enumerate(vol.shape) if a != ax]
     check_memory(max(min(vol.size, LEVEL_SAMPLE_VOXELS) * LEVEL_BYTES_PER_VOXEL,
-                     workers * slice_bytes(*slice_shape)),
+                     workers * slice_bytes(*slice_shape)) + vol.size * RESULT_BYTES_PER_VOXEL,
                  f"segmenting a {' x '.join(map(str, vol.shape))} volume with {workers} "
                  "process(es)", "use fewer worker processes (--jobs)")
     report = progress or (lambda frac, msg: None)

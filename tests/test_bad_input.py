@@ -248,7 +248,7 @@ def test_too_large_for_memory_fails_before_the_work(tmp_path, capsys, monkeypatc
     arr = _disc(64)
     np.save(tmp_path / "in.npy", arr)
     np.save(tmp_path / "vol.npy", np.stack([arr] * 4))
-    monkeypatch.setattr(ctseg.resources, "available_bytes", lambda: 2 ** 20)  # 1 MiB free
+    monkeypatch.setattr(ctseg.resources, "available_bytes", lambda: 2 ** 16)  # 64 KiB free
     assert_refused(tmp_path, capsys, [tmp_path / "in.npy", "-o", tmp_path / "m.vtp"],
                    "64 x 64 slice needs about", "GiB of memory", "crop or downsample")
     assert_refused(tmp_path, capsys, [tmp_path / "vol.npy", "-o", tmp_path / "m.vtp", "--jobs", "2"],
