@@ -37,7 +37,8 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-PAPER_SIZES = [((512, 512), 1000), ((500, 700), 1200)]  # (rows, cols), sites: paper Table 1
+# (rows, cols), sites: the paper's sizes (Table 1), and 512 x 512 with the default sites
+PAPER_SIZES = [((512, 512), 1000), ((500, 700), 1200), ((512, 512), None)]
 SEEDS = (0, 1, 2)
 INITS = ("ward", "random", "density_random")
 
@@ -179,7 +180,8 @@ def bench_stages(repeats):
         dice, bd = mesh_accuracy(p, seg)
         mem = in_child({"kind": "segment", "rows": r, "cols": c, "n_sites": n, "seed": 0,
                         "phantom": True})
-        rows.append({"size": f"{c} x {r}", "n_sites": n, "end_to_end_s": e2e,
+        rows.append({"size": f"{c} x {r}", "n_sites": runs[0][1]["n_sites"],
+                     "default_sites": n is None, "end_to_end_s": e2e,
                      "segment_s": seg_total, "write_s": e2e - seg_total, "stages_s": med,
                      "lloyd_iterations": runs[0][1]["lloyd_iterations"],
                      "n_triangles": int(len(seg.triangles)), "peak_mib": mem["peak_mib"],
@@ -311,18 +313,22 @@ def plots(res, folder):
 
     files = []
     if "stages" in res:
-        fig, ax = plt.subplots(figsize=(7, 3))
+        fig, ax = plt.subplots(figsize=(8, 3.2))
+        names = list(res["stages"][0]["stages_s"]) + ["write"]
+        colours = dict(zip(names, plt.get_cmap("tab10").colors))
         for i, r in enumerate(res["stages"]):
             left = 0.0
             for s, v in list(r["stages_s"].items()) + [("write", r["write_s"])]:
-                ax.barh(i, v, left=left, label=s if i == 0 else None)
+                ax.barh(i, v, left=left, color=colours[s], label=s if i == 0 else None)
                 left += v
         ax.axvline(1.0, color="k", ls="--", lw=1)
         ax.set_yticks(range(len(res["stages"])),
-                      [f"{r['size']}\n{r['n_sites']} sites" for r in res["stages"]])
+                      [f"{r['size']}\n{r['n_sites']} sites"
+                       + (" (default)" if r.get("default_sites") else "") for r in res["stages"]])
         ax.set_xlabel("wall time, s (median; dashed: 1 s goal)")
-        ax.legend(fontsize=7, ncol=3, loc="lower right")
-        ax.set_title("Stage split, end to end with the mesh written")
+        ax.set_xlim(0, max(1.1, 1.05 * max(r["end_to_end_s"] for r in res["stages"])))
+        ax.legend(fontsize=7, ncol=1, loc="center left", bbox_to_anchor=(1.01, 0.5))
+        ax.set_title("Stage split, end to end with the mesh written", fontsize=10)
         fig.tight_layout()
         files.append(_save(fig, folder, "bench_stages.png"))
     if "graphcut" in res:
@@ -340,7 +346,7 @@ def plots(res, folder):
             if log:
                 ax.set_yscale("log")
             else:
-                ax.set_ylim(0.8, 1.0)
+                ax.set_ylim(0.5, 1.0)
             ax.set_title(label, fontsize=9)
         axes[0].legend(fontsize=7)
         fig.suptitle("Graph cut on triangles vs pixels (512 x 512), and multi-Otsu", fontsize=10)
@@ -402,7 +408,8 @@ def markdown(res):
                 + " | write | Lloyd it. | triangles | peak MiB | Dice | boundary px |",
                 "|---" * (len(res["stages"][0]["stages_s"]) + 8) + "|"]
         for r in res["stages"]:
-            out.append(f"| {r['size']} / {r['n_sites']} | **{r['end_to_end_s']:.3f}** | "
+            default = " (default)" if r.get("default_sites") else ""
+            out.append(f"| {r['size']} / {r['n_sites']}{default} | **{r['end_to_end_s']:.3f}** | "
                        + " | ".join(f"{v:.3f}" for v in r["stages_s"].values())
                        + f" | {r['write_s']:.3f} | {r['lloyd_iterations']} | {r['n_triangles']} | "
                        f"{r['peak_mib']:.0f} | {fmt_dice(r['dice'])} | {r['boundary_px']:.2f} |")
@@ -470,16 +477,39 @@ def main():
     ap.add_argument("--quick", action="store_true",
                     help="fewer repeats and smaller scaling runs (a smoke test, not for quoting)")
     ap.add_argument("--out", default=os.path.join(HERE, "results"))
+    ap.add_argument("--replot", action="store_true",
+                    help="only rewrite the tables and plots from the saved benchmark.json")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         child_main(json.loads(args.child))
         return
+    saved = os.path.join(args.out, "benchmark.json")
+    res = {}
+    if os.path.exists(saved) and (args.replot or len(args.only) < 4):
+        with open(saved) as fh:  # keep the sections not run this time
+            res = json.load(fh)
+    if not args.replot:
+        res.update({"when": time.strftime("%Y-%m-%d %H:%M"),
+                    "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
+                               f"Python {platform.python_version()}"})
+        run_sections(res, args)
+    os.makedirs(args.out, exist_ok=True)
+    files = plots(res, args.out)
+    md = markdown(res)
+    with open(os.path.join(args.out, "benchmark.md"), "w") as fh:
+        fh.write(md + "\n")
+    with open(saved, "w") as fh:
+        json.dump(res, fh, indent=1)
+    print(md)
+    print("wrote", ", ".join([os.path.join(args.out, f) for f in ("benchmark.md", "benchmark.json")]
+                             + files))
+
+
+def run_sections(res, args):
     repeats = 2 if args.quick else 5
     sizes = [256, 512] if args.quick else [256, 512, 1024, 2048]
     sites = [250, 1000] if args.quick else [250, 500, 1000, 2000, 4000, 8000, 16000]
-    res = {"when": time.strftime("%Y-%m-%d %H:%M"),
-           "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"}
     if "stages" in args.only:
         res["stages"] = bench_stages(repeats)
     if "graphcut" in args.only:
@@ -488,16 +518,6 @@ def main():
         res["init"] = bench_init(max(1, repeats // 2))
     if "scaling" in args.only:
         res["scaling"] = bench_scaling(max(1, repeats // 2), sizes, sites)
-    os.makedirs(args.out, exist_ok=True)
-    files = plots(res, args.out)
-    md = markdown(res)
-    with open(os.path.join(args.out, "benchmark.md"), "w") as fh:
-        fh.write(md + "\n")
-    with open(os.path.join(args.out, "benchmark.json"), "w") as fh:
-        json.dump(res, fh, indent=1)
-    print(md)
-    print("wrote", ", ".join([os.path.join(args.out, f) for f in ("benchmark.md", "benchmark.json")]
-                             + files))
 
 
 if __name__ == "__main__":
