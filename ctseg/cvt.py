@@ -14,8 +14,9 @@ class CVTResult:
 
     Attributes
     ----------
-    sites : (n, 2) ndarray
-        Final sites, (x, y) = (col, row) pixel units.
+    sites : (n', 2) ndarray
+        Final sites, (x, y) = (col, row) pixel units; n' >= n (border sites added, see
+        :func:`lloyd_cvt`).
     labels : (rows, cols) int ndarray
         Index of each pixel's nearest final site (its Voronoi region).
     energy : list of float
@@ -90,6 +91,9 @@ def _pin_corners(sites, shape):
     return sites, np.array(taken)
 
 
+_BORDER_REACH = 0.5  # see the snapping step in lloyd_cvt
+
+
 def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
     """Lloyd iterations of the pixel CVT with the paper's corner and border rules.
 
@@ -106,7 +110,13 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
     Before the first iteration the site nearest each corner is moved onto it, and each
     site whose starting region holds border pixels is moved onto that border line (eq. 6),
     so the four corners are always sites, the border lines carry sites, and the Delaunay
-    triangulation covers the image rectangle. These classes are then kept: a border site
+    triangulation covers the image rectangle. Unlike the paper, a site whose starting
+    region reaches the border from farther in than half the square root of the region's
+    area stays free, and a new border site is added at that region's eq. (6) point
+    instead: the paper's rule pulls onto the border the sites that stand on a material
+    edge a few pixels inside the image, and the triangles then span air and material
+    (polymer Dice 0.950 -> 0.966 on a slice with a cover 6 px from the border). The
+    result may therefore hold a few per cent more sites than were given. These classes are then kept: a border site
     stays on its line, a free site stays free (its region may touch the border later; it
     then follows rule 3). A border site moves to eq. (6) when that does not raise its
     region's energy, else to the constrained minimiser (the centroid projected onto its
@@ -203,6 +213,31 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
     constraint = np.full(n, -1)
     line0, bary0 = border_barycentres(labels)
     on = line0 >= 0
+    # Only a site near its region's border line becomes a border site (within
+    # _BORDER_REACH x the square root of its region's area); for a site farther in, such
+    # as one standing on a material edge a few pixels inside the image, a new border site
+    # is added at eq. (6) instead, and the edge keeps its site.
+    area = np.bincount(labels, minlength=n).astype(float)
+    gap = np.abs(np.where(line0 < 2, sites[:, 1] - bary0[:, 1], sites[:, 0] - bary0[:, 0]))
+    near = gap <= _BORDER_REACH * np.sqrt(area)
+    extra = np.flatnonzero(on & ~near)
+    on &= near
+    if len(extra):
+        # one new site per distinct position not already taken by a snapped border site
+        taken = {tuple(p) for p in bary0[on]}
+        keep, seen = [], set()
+        for k in extra:
+            p = tuple(bary0[k])
+            if p not in taken and p not in seen:
+                seen.add(p)
+                keep.append(k)
+        keep = np.array(keep, np.int64)
+        sites = np.vstack([sites, bary0[keep]])
+        on = np.concatenate([on, np.ones(len(keep), bool)])
+        line0 = np.concatenate([line0, line0[keep]])
+        bary0 = np.vstack([bary0, bary0[keep]])
+        n = len(sites)
+        constraint = np.full(n, -1)
     sites[on] = bary0[on]
     constraint[on] = line0[on]
     sites[corner_sites] = [[0, 0], [cols - 1, 0], [0, rows - 1], [cols - 1, rows - 1]]

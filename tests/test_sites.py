@@ -79,9 +79,13 @@ def test_block_premerge_energy():
     rel = []
     for seed in range(4):
         rho = density_map(make_phantom(96, seed=seed, supersample=2).image)
-        exact = lloyd_cvt(rho, ward_sites(rho, 120, block_px=1)).energy[-1]
-        fast = lloyd_cvt(rho, ward_sites(rho, 120)).energy[-1]
-        rel.append((fast - exact) / exact)
+        exact = lloyd_cvt(rho, ward_sites(rho, 120, block_px=1))
+        fast = lloyd_cvt(rho, ward_sites(rho, 120))
+        # the CVT may add border sites (a few, not always as many for both starts), and
+        # a 2D CVT's energy falls as 1/n: compare F x n
+        e_exact = exact.energy[-1] * len(exact.sites)
+        e_fast = fast.energy[-1] * len(fast.sites)
+        rel.append((e_fast - e_exact) / e_exact)
     assert np.mean(rel) < 0.01 and max(rel) < 0.03
 
 
