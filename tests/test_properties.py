@@ -31,7 +31,7 @@ def small_images(draw):
     return img, n_sites
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(small_images())
 def test_pipeline_invariants(case):
     img, n_sites = case
