@@ -153,10 +153,10 @@ def test_real_sigint_to_the_command(tmp_path):
     import signal
     import time
 
-    vol = make_volume(16, 64, seed=3).image
+    vol = make_volume(64, 128, seed=3).image  # long enough (seconds) to interrupt mid-run
     np.save(tmp_path / "v.npy", vol)
     proc = subprocess.Popen([sys.executable, "-m", "ctseg.cli", "mesh", str(tmp_path / "v.npy"),
-                             "-o", str(tmp_path / "m.vtp"), "--jobs", "2", "--sites", "100"],
+                             "-o", str(tmp_path / "m.vtp"), "--jobs", "2", "--sites", "300"],
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
     folder = tmp_path / "m.vtp.ctseg-partial"
     deadline = time.time() + 60
