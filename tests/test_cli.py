@@ -157,7 +157,10 @@ def test_real_sigint_to_the_command(tmp_path):
     np.save(tmp_path / "v.npy", vol)
     proc = subprocess.Popen([sys.executable, "-m", "ctseg.cli", "mesh", str(tmp_path / "v.npy"),
                              "-o", str(tmp_path / "m.vtp"), "--jobs", "2", "--sites", "300"],
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            # as from a terminal: a shell that runs this suite in the
+                            # background (nohup, CI) makes its children ignore SIGINT
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     folder = tmp_path / "m.vtp.ctseg-partial"
     deadline = time.time() + 60
     while time.time() < deadline and not (folder.exists() and any(
