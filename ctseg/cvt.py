@@ -376,21 +376,10 @@ def _two_nearest(x, y, sites, h, gx, gy, start, items):
                             i2 = k
                 xx += step
         # distance from the point to the cells not yet visited
-        m = np.inf
-        done = True
-        if cx - r > 0:
-            m = min(m, x - (cx - r) * h)
-            done = False
-        if cx + r < gx - 1:
-            m = min(m, (cx + r + 1) * h - x)
-            done = False
-        if cy - r > 0:
-            m = min(m, y - (cy - r) * h)
-            done = False
-        if cy + r < gy - 1:
-            m = min(m, (cy + r + 1) * h - y)
-            done = False
-        if done or (i2 >= 0 and m > 0 and m * m >= b2):
+        mx = _block_margin(x, cx, r, h, gx)
+        my = _block_margin(y, cy, r, h, gy)
+        m = min(mx, my)
+        if m == np.inf or (i2 >= 0 and m > 0 and m * m >= b2):
             break
         r += 1
     return i1, np.sqrt(b1), i2, np.sqrt(b2)
@@ -467,18 +456,23 @@ def _local_drift(old_sites, drift, h, gx, gy, reach):
 
 
 @njit(cache=True)
+def _block_margin(v, c, reach, h, g):
+    """Along one axis: distance from coordinate v (in cell c) to the edge of the block of
+    cells within `reach` of c, on the sides where the grid goes on (inf where it does not)."""
+    m = np.inf
+    if c - reach > 0:
+        m = min(m, v - (c - reach) * h)
+    if c + reach < g - 1:
+        m = min(m, (c + reach + 1) * h - v)
+    return m
+
+
+@njit(cache=True)
 def _reach_margin(size, h, g, reach):
-    """Per pixel coordinate: distance to the edge of the block of cells within `reach` of
-    its cell, on the sides where the grid goes on (infinite where it does not)."""
+    """:func:`_block_margin` of every pixel coordinate 0..size-1 along one axis."""
     out = np.empty(size)
     for x in range(size):
-        c = min(int(x / h), g - 1)
-        m = np.inf
-        if c - reach > 0:
-            m = min(m, x - (c - reach) * h)
-        if c + reach < g - 1:
-            m = min(m, (c + reach + 1) * h - x)
-        out[x] = m
+        out[x] = _block_margin(x, min(int(x / h), g - 1), reach, h, g)
     return out
 
 
