@@ -124,8 +124,6 @@ def mesh_accuracy(p, seg):
 # ------------------------------------------------------------- fresh-process children
 def child_main(spec):
     """Run one job alone and print its wall time and peak memory (JSON)."""
-    import ctseg
-
     with tempfile.TemporaryDirectory() as folder:
         # load the compiled kernels and VTK first: their code is not the job's memory
         segment_and_write(big_slice(64), 40, folder)
@@ -226,9 +224,7 @@ def bench_graphcut(repeats):
                 path = os.path.join(folder, f"{name}.npz")
                 np.savez(path, levels=levels, **g)
                 mem[name] = in_child({"kind": "cut", "path": path})["peak_mib"]
-        from ctseg.metrics import label_image
-        seg_lab = label_image(seg.points, seg.triangles, m_tri, p.truth.shape)
-        d_tri, b_tri = mesh_accuracy(p, _with_material(seg, m_tri, seg_lab))
+        d_tri, b_tri = mesh_accuracy(p, _with_material(seg, m_tri))
         d_pix, b_pix = pixel_accuracy(p, m_pix.reshape(p.truth.shape))
         d_otsu, b_otsu = pixel_accuracy(p, lab_otsu)
         rows.append({"seed": seed, "nodes": {"triangles": len(tri["gray"]), "pixels": len(pix["gray"])},
@@ -243,7 +239,7 @@ def bench_graphcut(repeats):
     return rows
 
 
-def _with_material(seg, material, _labels):
+def _with_material(seg, material):
     """seg with another material array (boundary edges recomputed)."""
     import dataclasses
 
