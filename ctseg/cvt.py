@@ -295,7 +295,8 @@ def lloyd_cvt(rho, sites, tol=0.01, max_iter=200, progress=None):
         drift = np.hypot(*(new - sites).T)
         move = float(drift.max())
         old, sites = sites, np.ascontiguousarray(new)
-        sums, _ = _reassign(rows, cols, old, sites, drift, labels, u, l, w, centre[0], centre[1])
+        _reassign(rows, cols, old, sites, drift, labels, u, l)
+        sums = _region_sums(labels, w, n, rows, cols, centre[0], centre[1])
         energy.append(region_energy(sums, sites))
         if progress is not None:
             progress(it, max_iter)
@@ -480,7 +481,7 @@ _REACH = 2  # cells: sites farther than this cannot come near a pixel within one
 
 
 @njit(cache=True)
-def _reassign(rows, cols, old_sites, sites, drift, labels, u, l, w, cx, cy):
+def _reassign(rows, cols, old_sites, sites, drift, labels, u, l):
     """Hamerly's step after the sites moved by `drift`: re-find only pixels whose bounds fail.
 
     u >= distance to the own site, l <= distance to any other site. A site that started
@@ -488,8 +489,7 @@ def _reassign(rows, cols, old_sites, sites, drift, labels, u, l, w, cx, cy):
     those sites closer (the second largest if the largest is the pixel's own site); any
     other site is at least the block's margin minus the largest drift overall away. Most
     sites stop moving long before the last ones, so these local bounds fail far less
-    often than Hamerly's global one. Returns the region sums of the new regions (as
-    :func:`_region_sums`, in the same pass) and the number of pixels searched.
+    often than Hamerly's global one. Returns the number of pixels searched.
     """
     h, gx, gy, start, items = _site_grid(sites, cols - 1.0, rows - 1.0)
     b1, b1_site, b2 = _local_drift(old_sites, drift, h, gx, gy, _REACH)
@@ -500,10 +500,8 @@ def _reassign(rows, cols, old_sites, sites, drift, labels, u, l, w, cx, cy):
     for x in range(cols):
         cell_x[x] = min(int(x / h), gx - 1)
     searched = 0
-    sums = np.zeros((4, sites.shape[0]))
     for y in range(rows):
         row_cell = min(int(y / h), gy - 1) * gx
-        ry = y - cy
         for x in range(cols):
             i = y * cols + x
             c = row_cell + cell_x[x]
@@ -523,11 +521,4 @@ def _reassign(rows, cols, old_sites, sites, drift, labels, u, l, w, cx, cy):
                     searched += 1
             u[i] = ui
             l[i] = li
-            k = labels[i]
-            wi = w[i]
-            sums[0, k] += wi
-            sums[1, k] += wi * x
-            sums[2, k] += wi * y
-            rx = x - cx
-            sums[3, k] += wi * (rx * rx + ry * ry)
-    return sums, searched
+    return searched
