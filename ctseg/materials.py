@@ -253,8 +253,41 @@ def _recursive_split(f, area, adjacency, centroids, interior, edges, means, min_
         for q in range(n_pieces - 1, -1, -1):
             stack.append((comp[order[bounds[q]:bounds[q + 1]]], depth + 1))
     leaf_material = np.array(leaf_material, np.int64)
+    _label_fragmented_layers(area, leaf, leaf_material, adjacency, nearest, in_core,
+                             min_layer_area, k_modes)
     _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means)
     return leaf_material[leaf], leaf, calls, deepest
+
+
+def _label_fragmented_layers(area, leaf, leaf_material, adjacency, nearest, in_core,
+                             min_layer_area, k_modes):
+    """Give a material to runs of adjacent partial-volume leaves that form a thin layer, in place.
+
+    A thin layer between two other materials (a polymer sleeve between a steel core and an
+    air gap) has no interior triangles, and the cuts between its neighbours can chop it
+    into pieces too small for the thin-layer rule. Taken together, adjacent unlabelled
+    leaves covering at least ``min_layer_area``, more than half of it in one material's
+    core, are a layer of that material; a band of partial-volume triangles along a
+    boundary spreads over the gray range between its two sides instead.
+    """
+    n = len(leaf_material)
+    pending = leaf_material < 0
+    if pending.sum() < 2:
+        return
+    a, b = leaf[adjacency[:, 0]], leaf[adjacency[:, 1]]
+    join = (a != b) & pending[a] & pending[b]
+    graph = coo_matrix((np.ones(join.sum()), (a[join], b[join])), shape=(n, n))
+    _, run = connected_components(graph, directed=False)
+    tri = pending[leaf]
+    run_of_tri = run[leaf[tri]]
+    run_area = np.bincount(run_of_tri, area[tri], n)
+    core = tri & in_core
+    core_mass = np.zeros((n, k_modes))
+    np.add.at(core_mass, (run[leaf[core]], nearest[core]), area[core])
+    best = np.argmax(core_mass, axis=1)
+    layer = (run_area >= min_layer_area) & (core_mass.max(axis=1) > 0.5 * run_area)
+    fix = pending & layer[run]
+    leaf_material[fix] = best[run[fix]]
 
 
 def _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means):

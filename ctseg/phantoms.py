@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from .projection import filtered_backprojection
+
 # Linear attenuation (1/cm) at the spectrum's energy bins, from NIST XCOM mass attenuation
 # coefficients times density (steel 7.87, aluminium 2.70, POM polymer 1.41 g/cm^3).
 ENERGIES_KEV = np.array([40.0, 60.0, 80.0, 100.0, 150.0])
@@ -136,6 +138,9 @@ def _radon(maps, angles):
     """Parallel-beam line integrals (pixel units) of each map: (k, n_angles, n_det).
 
     The detector spans the image diagonal so that the whole square is reconstructed.
+    Ray-driven (bilinear samples along each ray), deliberately not the pixel-driven
+    :func:`ctseg.projection.forward_project` that the streak correction uses: data made
+    with the corrector's own projector would flatter it.
     """
     k, n, _ = maps.shape
     c = (n - 1) / 2.0
@@ -150,23 +155,6 @@ def _radon(maps, angles):
         for m in range(k):
             out[m, a] = ndimage.map_coordinates(maps[m], [ys, xs], order=1, mode="constant").sum(axis=0)
     return out
-
-
-def _fbp(sino, angles, n):
-    """Filtered back-projection (ramp x sinc, Shepp-Logan) of a (n_angles, n_det) sinogram."""
-    n_det = sino.shape[1]
-    pad = int(2 ** np.ceil(np.log2(2 * n_det)))
-    freq = np.fft.fftfreq(pad)
-    filt = 2 * np.abs(freq) * np.sinc(freq)  # Shepp-Logan: ramp x sinc
-    proj = np.fft.ifft(np.fft.fft(sino, pad, axis=1) * filt, axis=1).real[:, :n_det]
-    c = (n - 1) / 2.0
-    yy, xx = np.mgrid[0:n, 0:n] - c
-    rec = np.zeros((n, n))
-    t_axis = np.arange(n_det) - (n_det - 1) / 2.0
-    for a, th in enumerate(angles):
-        tpos = xx * np.cos(th) + yy * np.sin(th)
-        rec += np.interp(tpos.ravel(), t_axis, proj[a], left=0, right=0).reshape(n, n)
-    return rec * np.pi / (2 * len(angles))
 
 
 def simulate_ct(labels_hr, supersample, materials=MATERIALS, pixel_mm=0.08, photons=1e6,
@@ -206,7 +194,7 @@ def simulate_ct(labels_hr, supersample, materials=MATERIALS, pixel_mm=0.08, phot
     counts = np.maximum(rng.poisson(expected), 1)
     sino = -np.log(counts / photons)
     sino = ndimage.gaussian_filter1d(sino, 0.6, axis=1)  # detector blur
-    rec = _fbp(sino, angles, n) / (pixel_mm / 10.0)
+    rec = filtered_backprojection(sino, angles, (n, n)) / (pixel_mm / 10.0)
     return rec.astype(np.float32)
 
 

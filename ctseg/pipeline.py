@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._validate import as_image, check_number
+from .beam_hardening import correct_metal_streaks
 from .boundary import chain_polylines, material_boundary
 from .cvt import lloyd_cvt
 from .density import density_map
@@ -135,11 +136,11 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
                   merge_k=5.0, merge_rel=0.2, merge_floor=2.0, merge_threshold=None,
                   n_materials=None, theta=None, lam=70.0, beta=0.286, min_triangles=2,
                   max_depth=32, min_material_area=None, min_pocket_area=4.0,
-                  weight_by_edge_length=False, gray_scale=None, levels_255=None,
-                  progress=None):
+                  weight_by_edge_length=False, streak_correction=True, gray_scale=None,
+                  levels_255=None, progress=None):
     """Segment a 2D gray image into a triangle mesh with one material per triangle.
 
-    density map (SPEC 1) -> initial sites (SPEC 2) -> Lloyd CVT (SPEC 3) -> Delaunay mesh
+    [metal streak correction (not in the paper)] -> density map (SPEC 1) -> initial sites (SPEC 2) -> Lloyd CVT (SPEC 3) -> Delaunay mesh
     (SPEC 4) -> triangle gray (SPEC 5) -> recursive graph cut (SPEC 6-7).
 
     Parameters
@@ -164,6 +165,11 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         :func:`ctseg.materials.segment_triangles`.
     weight_by_edge_length : bool
         Multiply n-links by the shared edge length (an option, not the paper's).
+    streak_correction : bool
+        First remove the beam-hardening streaks of the densest material
+        (:func:`ctseg.beam_hardening.correct_metal_streaks`; not in the paper). Every later
+        stage, and the reported ``gray``, then use the corrected image; the fitted weight
+        is in ``diagnostics["streak_correction"]``.
     gray_scale : (offset, factor), optional
         Map of gray values onto 0-255 found elsewhere (a whole volume's,
         :func:`ctseg.intensity.gray_scale`); default: this image's percentiles.
@@ -215,7 +221,14 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         times[name] = time.perf_counter() - t0
         return out
 
-    g255, scale = timed("rescale", 0.0, rescale_gray, img, scale=gray_scale)
+    streaks = None
+    if streak_correction:
+        streaks = timed("streak_correction", 0.0, _correct_streaks, img, gray_scale, levels_255,
+                        sigma=sigma, density_floor=density_floor,
+                        density_saturation=density_saturation, merge_k=merge_k,
+                        merge_rel=merge_rel, merge_floor=merge_floor, n_materials=n_materials)
+        img = streaks.image
+    g255, scale = timed("rescale", 0.01, rescale_gray, img, scale=gray_scale)
     noise = estimate_noise(g255)
     rho = timed("density", 0.01, density_map, img, sigma=sigma, floor=density_floor,
                 saturation=density_saturation, ridge=density_ridge)
@@ -263,11 +276,30 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         "graphcut_calls": int(seg.graphcut_calls),
         "recursion_depth": int(seg.max_depth_reached),
         "material_gray": [float(v) for v in mat_gray],
+        "streak_correction": streaks.summary() if streaks else None,
     }
     return SegmentedMesh(points=mesh.points, triangles=mesh.triangles, material=material,
                          gray=gray, boundary_edges=bedges, boundary_sides=bsides,
                          material_gray=mat_gray, adjacency=mesh.adjacency, shape=img.shape,
                          diagnostics=diagnostics, density=rho, cvt_labels=cvt.labels)
+
+
+def _correct_streaks(img, gray_scale, levels_255, *, sigma, density_floor, density_saturation,
+                     merge_k, merge_rel, merge_floor, n_materials):
+    """Metal streak correction with the material levels of the raw image (or the given ones)."""
+    if levels_255 is not None and gray_scale is not None:
+        offset, factor = gray_scale
+        levels = np.asarray(levels_255, float) / factor + offset if factor else np.array([offset])
+    else:
+        scale = rescale_gray(img, scale=gray_scale)[1]
+        offset, factor = scale
+        levels_raw = material_levels(img, scale, sigma=sigma, density_floor=density_floor,
+                                     density_saturation=density_saturation, merge_k=merge_k,
+                                     merge_rel=merge_rel, merge_floor=merge_floor,
+                                     n_materials=n_materials)[0]
+        levels = levels_raw / factor + offset if factor else np.array([offset])
+    flat = flat_pixels(img, sigma, density_floor, density_saturation)
+    return correct_metal_streaks(img, levels, flat=flat, sigma=sigma)
 
 
 @dataclass
