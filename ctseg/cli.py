@@ -78,7 +78,8 @@ def _mesh(args):
     image = _checked_input(np.asarray(image), args.input)
     show = sys.stderr.isatty() and not args.quiet
     progress = _progress_printer(show)
-    common = dict(n_sites=args.sites, seed=args.seed, n_materials=args.materials)
+    common = dict(n_sites=args.sites, seed=args.seed, n_materials=args.materials,
+                  streak_correction=not args.no_streak_correction)
     if image.ndim == 2:
         if args.resume:
             print("ctseg: note: --resume applies to volumes, whose slices are saved as they "
@@ -216,6 +217,9 @@ def build_parser():
                         "it finished (kept in OUTPUT.ctseg-partial) are not computed again")
     m.add_argument("--series", metavar="UID",
                    help="DICOM SeriesInstanceUID, for a folder holding several series")
+    m.add_argument("--no-streak-correction", action="store_true",
+                   help="segment the image as it is: skip the removal of the dark beam-hardening "
+                        "streaks next to metal (on by default; its fitted weight is in the report)")
     m.add_argument("--report", help="write all diagnostics as JSON")
     m.add_argument("--figure", help="write the six-panel figure (PNG; a volume's middle slice)")
     m.add_argument("--truth", help="ground-truth labels (same shape) to report Dice against")

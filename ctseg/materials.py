@@ -255,7 +255,8 @@ def _recursive_split(f, area, adjacency, centroids, interior, edges, means, min_
     leaf_material = np.array(leaf_material, np.int64)
     _label_fragmented_layers(area, leaf, leaf_material, adjacency, nearest, in_core,
                              min_layer_area, k_modes)
-    _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means)
+    _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means,
+                                 min_layer_area / 4.0)
     return leaf_material[leaf], leaf, calls, deepest
 
 
@@ -290,7 +291,7 @@ def _label_fragmented_layers(area, leaf, leaf_material, adjacency, nearest, in_c
     leaf_material[fix] = best[run[fix]]
 
 
-def _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means):
+def _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means, min_area=np.inf):
     """Give leaves without interior triangles a material, in place.
 
     A partial-volume mix lies between the grays of the materials around it and joins the
@@ -299,6 +300,13 @@ def _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means)
     n = len(leaf_material)
     la = np.bincount(leaf, area, n)
     lg = np.bincount(leaf, area * f, n) / np.maximum(la, 1e-300)
+    gaps = np.diff(means)
+    half_lo = np.r_[np.inf, gaps] * 0.25
+    half_hi = np.r_[gaps, np.inf] * 0.25
+
+    def in_core_of(g, k):
+        return -half_lo[k] <= g - means[k] <= half_hi[k]
+
     a, b = leaf[adjacency[:, 0]], leaf[adjacency[:, 1]]
     cross = a != b
     src = np.concatenate([a[cross], b[cross]])
@@ -320,7 +328,12 @@ def _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means)
                 continue
             lv = means[ng]
             if len(ng) >= 2 and lv.min() <= lg[k] <= lv.max():
-                leaf_material[k] = ng[int(np.argmin(np.abs(lv - lg[k])))]
+                closest = int(np.argmin(np.abs(means - lg[k])))
+                if la[k] >= min_area and in_core_of(lg[k], closest):
+                    # too large to be a mixed band: a piece of the material in between
+                    leaf_material[k] = closest
+                else:
+                    leaf_material[k] = ng[int(np.argmin(np.abs(lv - lg[k])))]
             else:
                 leaf_material[k] = int(np.argmin(np.abs(means - lg[k])))
             progressed = True

@@ -43,6 +43,26 @@ def test_mesh_command_writes_everything(slice_files, capsys):
     assert b.GetNumberOfLines() > 0 and b.GetCellData().GetArray("material_a") is not None
 
 
+def test_streak_correction_option(tmp_path):
+    # a simulated slice with steel: corrected by default (gray values change), not with the flag
+    from ctseg.phantoms import make_phantom
+    p = make_phantom(96, seed=0)
+    np.save(tmp_path / "s.npy", p.image)
+    grays = {}
+    for flag in ([], ["--no-streak-correction"]):
+        name = "off" if flag else "on"
+        assert main(["mesh", str(tmp_path / "s.npy"), "-o", str(tmp_path / f"{name}.vtp"),
+                     "--report", str(tmp_path / f"{name}.json"), "--sites", "200", "-q"] + flag) == 0
+        report = json.loads((tmp_path / f"{name}.json").read_text())
+        grays[name] = polydata_to_arrays(read_polydata(tmp_path / f"{name}.vtp"))[2]["gray"]
+        if flag:
+            assert report["streak_correction"] is None
+        else:
+            assert report["streak_correction"]["weight"] > 0
+            assert "streak_correction" in report["times_s"]
+    assert not np.array_equal(grays["on"], grays["off"])
+
+
 def test_materials_option(slice_files):
     d = slice_files
     assert main(["mesh", str(d / "slice.npy"), "-o", str(d / "m.vtp"), "--materials", "1", "-q"]) == 0

@@ -70,3 +70,22 @@ def test_constant_gray_is_one_material():
     m, g, a, c = _mesh_of(np.full((20, 20), 3.0) + np.eye(20) * 0, 12)
     res = segment_triangles(np.zeros(len(g)), a, m.adjacency, c)
     assert np.all(res.material == 0) and len(res.material_gray) == 1
+
+
+def test_fragmented_thin_layer_is_one_material_and_small_or_mixed_runs_are_not():
+    from ctseg.materials import _label_fragmented_layers
+    # one triangle per leaf; leaves 0 (air) and 1 (steel) are labelled, the rest pending
+    # run A: leaves 2-6 chained, all in the polymer core, 5 x 300 px  -> a layer
+    # run B: leaves 7-8, polymer core, 2 x 300 px (below 1000 px)   -> left pending
+    # run C: leaves 9-12, 4 x 400 px, only half in one core          -> left pending
+    n = 13
+    leaf = np.arange(n)
+    leaf_material = np.array([0, 3] + [-1] * 11)
+    area = np.array([5000, 5000] + [300] * 7 + [400] * 4, float)
+    nearest = np.array([0, 3, 1, 1, 1, 1, 1, 1, 1, 1, 2, 1, 2])
+    in_core = np.array([True, True] + [True] * 7 + [True, True, False, False])
+    pairs = [(2, 3), (3, 4), (4, 5), (5, 6), (7, 8), (9, 10), (10, 11), (11, 12)]
+    pairs += [(0, 2), (6, 1), (0, 7), (8, 1), (0, 9), (12, 1)]  # every run between air and steel
+    adjacency = np.array(pairs)
+    _label_fragmented_layers(area, leaf, leaf_material, adjacency, nearest, in_core, 1000.0, 4)
+    assert leaf_material.tolist() == [0, 3, 1, 1, 1, 1, 1, -1, -1, -1, -1, -1, -1]

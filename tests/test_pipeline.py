@@ -51,7 +51,8 @@ def test_same_seed_same_output_and_random_init_depends_on_seed():
 
 def test_outputs_consistent():
     img, _ = disc_image(60, noise=4.0)
-    seg = ctseg.segment_image(img, n_sites=100)
+    # without the streak correction the gray is the input's (checked by its integral below)
+    seg = ctseg.segment_image(img, n_sites=100, streak_correction=False)
     d = seg.diagnostics
     assert set(d["times_s"]) >= {"density", "initial_sites", "cvt", "triangulation", "triangle_gray", "graphcut"}
     e = np.array(d["cvt_energy"])
@@ -74,6 +75,21 @@ def test_outputs_consistent():
         assert ma < mb
     lines, sides = seg.boundary_polylines()
     assert sum(len(l) - 1 for l in lines) == len(seg.boundary_edges)
+
+
+def test_streak_correction_comes_before_every_stage(phantom_cache):
+    # segmenting with the correction == segmenting the corrected image without it
+    from ctseg.pipeline import _correct_streaks, SEGMENT_DEFAULTS
+    p = phantom_cache(128, 0, ("air", "polymer", "aluminium", "steel"))
+    seg = ctseg.segment_image(p.image, n_sites=300)
+    keys = ("sigma", "density_floor", "density_saturation", "merge_k", "merge_rel",
+            "merge_floor", "n_materials")
+    fixed = _correct_streaks(np.asarray(p.image, float), None, None,
+                             **{k: SEGMENT_DEFAULTS[k] for k in keys})
+    assert fixed.weight > 0 and seg.diagnostics["streak_correction"]["weight"] == fixed.weight
+    ref = ctseg.segment_image(fixed.image, n_sites=300, streak_correction=False)
+    for name in ("points", "triangles", "material", "gray"):
+        np.testing.assert_array_equal(getattr(seg, name), getattr(ref, name))
 
 
 def test_units_do_not_matter():

@@ -152,6 +152,9 @@ class CTSegment(CTSegmentFilter):
     SetWeightByEdgeLength = _int("WeightByEdgeLength", 0, 0, 1, "Multiply neighbour "
                                  "capacities by the shared edge length (not the paper's).",
                                  lambda self, v: self.SetParameter("weight_by_edge_length", bool(v)))
+    SetStreakCorrection = _int("StreakCorrection", 1, 0, 1, "First remove the dark "
+                               "beam-hardening streaks next to metal (not the paper's).",
+                               lambda self, v: self.SetParameter("streak_correction", bool(v)))
 
 
 @_stage("CTDensityMap", "CT Density Map", ("Input", 0, "vtkImageData"))
