@@ -295,7 +295,9 @@ def _label_partial_volume_leaves(f, area, leaf, leaf_material, adjacency, means,
     """Give leaves without interior triangles a material, in place.
 
     A partial-volume mix lies between the grays of the materials around it and joins the
-    closest of those; anything else (a small pore, a speck) joins the closest level.
+    closest of those, unless it covers ``min_area`` or more and its gray is in the core of
+    a material in between (then it is that material: a mixed band is thin); anything else
+    (a small pore, a speck) joins the closest level.
     """
     n = len(leaf_material)
     la = np.bincount(leaf, area, n)
@@ -498,7 +500,12 @@ def segment_triangles(gray, area, adjacency, centroids, step_threshold=None, mer
        partial-volume mix or a small pocket (a steel/polymer mix can have aluminium's
        gray, so gray alone cannot tell): if its
        gray lies between the materials of the leaves around it, it joins the closest of
-       those, else the material closest in gray.
+       those, else the material closest in gray. Two exceptions for thin layers, which
+       have no interior triangles: adjacent such leaves that together cover
+       4 x ``min_material_area``, more than half of it in one material's core, are that
+       material (:func:`_label_fragmented_layers`); and a leaf of at least
+       ``min_material_area`` whose gray lies in the core of a material between its
+       neighbours' is that material (too large to be a mixed band).
     4. Then triangle by triangle (twice): a triangle that is not interior and whose gray
        lies between the levels of two materials among its own and its neighbours' takes
        the closer of those, i.e. the material that covers most of it
