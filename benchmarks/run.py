@@ -196,13 +196,16 @@ def bench_graphcut(repeats):
     from baselines import otsu_labels, pixel_graph
     from ctseg.intensity import rescale_gray
     from ctseg.materials import segment_triangles
+    from ctseg.pipeline import correct_streaks
     from ctseg.triangulation import triangle_areas
 
     rows = []
     for seed in SEEDS:
         p = phantom(512, 512, seed)
-        seg = ctseg.segment_image(p.image)
-        g255, (off, fac) = rescale_gray(p.image)
+        # both graphs from the same streak-corrected image (what segment_image segments)
+        image = correct_streaks(p.image).image
+        seg = ctseg.segment_image(image, streak_correction=False)
+        g255, (off, fac) = rescale_gray(image)
         levels = np.array(seg.diagnostics["material_levels_255"])
         tri = {"gray": np.clip((seg.gray - off) * fac, 0, 255),
                "area": triangle_areas(seg.points, seg.triangles), "adjacency": seg.adjacency,

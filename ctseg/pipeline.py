@@ -223,7 +223,7 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
 
     streaks = None
     if streak_correction:
-        streaks = timed("streak_correction", 0.0, _correct_streaks, img, gray_scale, levels_255,
+        streaks = timed("streak_correction", 0.0, correct_streaks, img, gray_scale, levels_255,
                         sigma=sigma, density_floor=density_floor,
                         density_saturation=density_saturation, merge_k=merge_k,
                         merge_rel=merge_rel, merge_floor=merge_floor, n_materials=n_materials)
@@ -284,9 +284,27 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
                          diagnostics=diagnostics, density=rho, cvt_labels=cvt.labels)
 
 
-def _correct_streaks(img, gray_scale, levels_255, *, sigma, density_floor, density_saturation,
-                     merge_k, merge_rel, merge_floor, n_materials):
-    """Metal streak correction with the material levels of the raw image (or the given ones)."""
+def correct_streaks(image, gray_scale=None, levels_255=None, *, sigma=1.0, density_floor=0.02,
+                    density_saturation="auto", merge_k=5.0, merge_rel=0.2, merge_floor=2.0,
+                    n_materials=None):
+    """The metal streak correction as :func:`segment_image` runs it.
+
+    :func:`ctseg.beam_hardening.correct_metal_streaks` with the material levels of the
+    image itself (:func:`material_levels`) or the given ones, and its flat pixels.
+
+    Parameters
+    ----------
+    image : (rows, cols) array_like
+    gray_scale, levels_255
+        As in :func:`segment_image` (a volume's map onto 0-255 and its levels).
+    other parameters
+        As in :func:`segment_image`.
+
+    Returns
+    -------
+    ctseg.beam_hardening.StreakCorrection
+    """
+    img = as_image(image)
     if levels_255 is not None and gray_scale is not None:
         offset, factor = gray_scale
         levels = np.asarray(levels_255, float) / factor + offset if factor else np.array([offset])
