@@ -28,6 +28,11 @@ from .projection import filtered_backprojection, forward_project
 # (polymer Dice 0.975-0.992 against 0.975-0.989 on seeds 0-8) in 0.15 s instead of 0.45 s.
 BASIS_MAX_PX = 256
 
+MIN_EXPLAINED = 0.05
+"""A correction that removes less than this share of the within-material variance is
+fitting noise, not streaks, and is not applied (simulated steel slices: 0.11 at 96 px,
+0.39-0.75 at 512 px; a 48 px volume slice with a little steel: 0.001)."""
+
 
 def metal_streak_basis(metal, n_angles=None):
     """The shape of the beam-hardening artifact of a metal mask: FBP of squared path lengths.
@@ -130,6 +135,7 @@ class StreakCorrection:
     reason: str = ""
 
     def summary(self):
+        """The figures as a JSON-ready dict (``diagnostics["streak_correction"]``)."""
         return {"weight": self.weight, "explained": self.explained,
                 "metal_pixels": self.metal_pixels, "max_change": self.max_change,
                 "skipped": self.reason}
@@ -171,8 +177,9 @@ def correct_metal_streaks(image, levels, *, flat=None, sigma=1.0, margin_px=3, r
 
     Notes
     -----
-    The weight is kept only when positive: beam hardening makes rays through metal read
-    too *little* attenuation, never too much. The streak basis assumes parallel-beam
+    The weight is kept only when positive (beam hardening makes rays through metal read
+    too *little* attenuation, never too much) and when the correction removes at least
+    :data:`MIN_EXPLAINED` of the within-material variance. The streak basis assumes parallel-beam
     geometry over the whole image; a crop that cuts off metal, or fan/cone-beam data,
     fit less well and get a smaller weight.
     """
@@ -211,7 +218,10 @@ def correct_metal_streaks(image, levels, *, flat=None, sigma=1.0, margin_px=3, r
             return StreakCorrection(img, metal_pixels=n_metal,
                                     reason="fitted weight not positive")
         classes = classify(img + weight * basis)
+    if explained < MIN_EXPLAINED:
+        return StreakCorrection(img, metal_pixels=n_metal, explained=float(explained),
+                                reason=f"explains only {explained:.1%} of the variance")
     change = weight * basis
-    max_change = float(np.abs(change[~metal]).max()) if n_metal < img.size else 0.0
+    max_change = float(np.abs(change[~metal]).max())
     return StreakCorrection(img + change, weight=float(weight), explained=float(explained),
                             metal_pixels=n_metal, max_change=max_change)

@@ -51,6 +51,9 @@ class SegmentedMesh:
         ``graphcut_calls`` and the parameters used.
     density, cvt_labels : ndarray
         The density map and the final Voronoi regions (for figures).
+    corrected_image : ndarray or None
+        The streak-corrected image the mesh was made on (for figures); None when the
+        correction was off or changed nothing.
     """
 
     points: np.ndarray
@@ -65,6 +68,7 @@ class SegmentedMesh:
     diagnostics: dict = field(default_factory=dict)
     density: np.ndarray = None
     cvt_labels: np.ndarray = None
+    corrected_image: np.ndarray = None
 
     @property
     def n_materials(self):
@@ -281,7 +285,8 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
     return SegmentedMesh(points=mesh.points, triangles=mesh.triangles, material=material,
                          gray=gray, boundary_edges=bedges, boundary_sides=bsides,
                          material_gray=mat_gray, adjacency=mesh.adjacency, shape=img.shape,
-                         diagnostics=diagnostics, density=rho, cvt_labels=cvt.labels)
+                         diagnostics=diagnostics, density=rho, cvt_labels=cvt.labels,
+                         corrected_image=img if streaks is not None and streaks.weight > 0 else None)
 
 
 def correct_streaks(image, gray_scale=None, levels_255=None, *, sigma=1.0, density_floor=0.02,
@@ -305,18 +310,16 @@ def correct_streaks(image, gray_scale=None, levels_255=None, *, sigma=1.0, densi
     ctseg.beam_hardening.StreakCorrection
     """
     img = as_image(image)
+    flat = flat_pixels(img, sigma, density_floor, density_saturation)
     if levels_255 is not None and gray_scale is not None:
         offset, factor = gray_scale
         levels = np.asarray(levels_255, float) / factor + offset if factor else np.array([offset])
     else:
-        scale = rescale_gray(img, scale=gray_scale)[1]
-        offset, factor = scale
-        levels_raw = material_levels(img, scale, sigma=sigma, density_floor=density_floor,
-                                     density_saturation=density_saturation, merge_k=merge_k,
-                                     merge_rel=merge_rel, merge_floor=merge_floor,
-                                     n_materials=n_materials)[0]
+        # material_levels' own way, with the flat pixels computed once for both uses
+        g255, (offset, factor) = rescale_gray(img, scale=gray_scale)
+        levels_raw = pixel_material_levels(g255, flat, merge_k=merge_k, merge_rel=merge_rel,
+                                           merge_floor=merge_floor, n_materials=n_materials)[0]
         levels = levels_raw / factor + offset if factor else np.array([offset])
-    flat = flat_pixels(img, sigma, density_floor, density_saturation)
     return correct_metal_streaks(img, levels, flat=flat, sigma=sigma)
 
 

@@ -1,6 +1,5 @@
 """Memory needed by a job, checked before the work starts: an input that cannot fit fails
 at once with a clear message instead of being killed by the system hours later."""
-import os
 
 from .errors import InputError
 

@@ -61,7 +61,7 @@ class VolumeSegmentation:
     ----------
     slices : list of SegmentedMesh
         One per slice along ``axis``, in slice order; material k means the same material in
-        every slice. The per-pixel maps (``density``, ``cvt_labels``) are dropped to keep
+        every slice. The per-pixel maps (``density``, ``cvt_labels``, ``corrected_image``) are dropped to keep
         memory bounded.
     axis : int
         Numpy axis of the (nz, ny, nx) volume that was sliced.
@@ -87,6 +87,7 @@ def _segment_slice(image, params, keep_maps=False):
     if not keep_maps:
         seg.density = None
         seg.cvt_labels = None
+        seg.corrected_image = None
     return seg
 
 

@@ -1,5 +1,6 @@
 """The paper's Fig. 5 rendered with VTK offscreen (no display, no matplotlib): six panels of
-one slice -- input, density map, CVT regions with sites, Delaunay mesh over the image, mesh
+one slice -- input, density map, CVT regions with sites, Delaunay mesh over the image (the
+streak-corrected one when the correction changed it), mesh
 coloured by material, material boundaries over the input."""
 import os
 
@@ -182,14 +183,16 @@ def render_figure(path, image, seg, title=None):
     n_mat = int(seg.n_materials)
     edges = _edges(seg.triangles)
     n_regions = int(seg.cvt_labels.max()) + 1
+    corrected = getattr(seg, "corrected_image", None)
     panels = [
         ("input", [_image_actor(img, (lo, hi))]),
         ("density map", [_image_actor(seg.density, (seg.density.min(), seg.density.max()))]),
         (f"CVT: {len(seg.points)} sites", [
             _image_actor(seg.cvt_labels, lut=_region_lut(n_regions)),
             _poly_actor(_mesh_poly(seg.points, vertices=True), rgb=(0, 0, 0), point_size=3.0)]),
-        (f"Delaunay: {len(seg.triangles)} triangles", [
-            _image_actor(img, (lo, hi)),
+        (f"Delaunay: {len(seg.triangles)} triangles"
+         + (", streak-corrected image" if corrected is not None else ""), [
+            _image_actor(img if corrected is None else corrected, (lo, hi)),
             _poly_actor(_mesh_poly(seg.points, lines=edges), rgb=(1.0, 0.25, 0.25))]),
         (f"materials: {n_mat}", [
             _poly_actor(_mesh_poly(seg.points, seg.triangles, seg.material),

@@ -12,7 +12,7 @@ from ctseg.meshcheck import mesh_check_report
 
 from ctseg.phantoms import make_volume
 
-from conftest import disc_image, requires_rendering
+from conftest import disc_image
 
 
 @pytest.fixture()

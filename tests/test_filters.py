@@ -1,6 +1,8 @@
 """The VTK filters in real VTK pipelines, compared with the ctseg functions on the same arrays;
 world geometry (spacing, origin, rotated direction); volumes slice by slice along each axis;
 the same bytes from every executor."""
+import os
+
 import numpy as np
 import pytest
 
@@ -264,3 +266,31 @@ def test_a_failing_slice_is_named():
     vol = np.random.default_rng(0).random((3, 12, 12))
     with pytest.raises(CTSegError, match="slice 0: n_sites"):
         segment_volume(vol, n_sites=1000)
+
+
+def test_paraview_plugin_exposes_every_segment_parameter():
+    # the plugin is declarations only (it imports paraview), so read it as text: every
+    # tuning keyword of segment_image must reach the filter through some property
+    import re
+    from ctseg.pipeline import SEGMENT_DEFAULTS
+    src = open(os.path.join(os.path.dirname(__file__), "..", "plugin", "paraview",
+                            "ctseg_paraview.py")).read()
+    routed = set(re.findall(r'_param\("(\w+)"', src)) | set(re.findall(r'SetParameter\("(\w+)"', src))
+    direct = {"n_materials"}  # its own property, SetNumberOfMaterials
+    missing = set(SEGMENT_DEFAULTS) - routed - direct
+    assert not missing, f"segment_image keywords without a ParaView property: {sorted(missing)}"
+
+
+def test_volume_keeps_the_per_pixel_maps_of_the_figure_slice_only():
+    from ctseg.phantoms import make_phantom
+    from ctseg.volume import segment_volume
+    vol = np.stack([make_phantom(96, seed=0).image] * 3)
+    res = segment_volume(vol, n_sites=200, keep_maps=(1,))
+    kept = res.slices[1]
+    assert kept.density is not None and kept.cvt_labels is not None
+    # the slice holds steel and its streaks: it was corrected and keeps that image too
+    assert kept.diagnostics["streak_correction"]["weight"] > 0
+    assert kept.corrected_image is not None and kept.corrected_image.shape == (96, 96)
+    for k in (0, 2):
+        s = res.slices[k]
+        assert s.density is None and s.cvt_labels is None and s.corrected_image is None

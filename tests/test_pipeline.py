@@ -87,6 +87,7 @@ def test_streak_correction_comes_before_every_stage(phantom_cache):
     fixed = correct_streaks(p.image,
                              **{k: SEGMENT_DEFAULTS[k] for k in keys})
     assert fixed.weight > 0 and seg.diagnostics["streak_correction"]["weight"] == fixed.weight
+    np.testing.assert_array_equal(seg.corrected_image, fixed.image)
     ref = ctseg.segment_image(fixed.image, n_sites=300, streak_correction=False)
     for name in ("points", "triangles", "material", "gray"):
         np.testing.assert_array_equal(getattr(seg, name), getattr(ref, name))
