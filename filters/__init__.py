@@ -8,6 +8,7 @@ from .readers import read_image, SUPPORTED_INPUTS
 from .writers import write_mesh, write_polydata, read_polydata, MESH_FORMATS
 from .base import CTSegAlgorithm
 from .density import DensityMapFilter
+from .streaks import MetalStreakFilter
 from .sites import CVTSitesFilter
 from .triangulation import DelaunayMeshFilter
 from .triangle_gray import TriangleGrayFilter
@@ -19,5 +20,5 @@ __all__ = ["ImageGeometry", "image_to_array", "array_to_image", "mesh_to_polydat
            "boundary_to_polydata", "append_polydata", "segmentation_to_polydata",
            "polydata_to_arrays", "read_image", "SUPPORTED_INPUTS", "write_mesh",
            "write_polydata", "read_polydata", "MESH_FORMATS", "CTSegAlgorithm",
-           "DensityMapFilter", "CVTSitesFilter", "DelaunayMeshFilter", "TriangleGrayFilter",
+           "MetalStreakFilter", "DensityMapFilter", "CVTSitesFilter", "DelaunayMeshFilter", "TriangleGrayFilter",
            "GraphCutSegmentFilter", "MaterialBoundaryFilter", "CTSegmentFilter"]

@@ -10,10 +10,11 @@ import ctseg
 from ctseg.errors import CTSegError
 from ctseg.filters import (CTSegmentFilter, CVTSitesFilter, DelaunayMeshFilter,
                            DensityMapFilter, GraphCutSegmentFilter, MaterialBoundaryFilter,
-                           TriangleGrayFilter, array_to_image, polydata_to_arrays)
+                           MetalStreakFilter, TriangleGrayFilter, array_to_image,
+                           polydata_to_arrays)
 from ctseg.filters.convert import ImageGeometry
 from ctseg.metrics import dice_per_label
-from ctseg.phantoms import make_volume
+from ctseg.phantoms import make_phantom, make_volume
 from ctseg.volume import volume_labels
 
 from conftest import disc_image
@@ -77,37 +78,45 @@ def test_segment_filter_in_a_vtk_pipeline(tmp_path):
 
 
 def test_stage_filters_chain_equals_segment_image(tmp_path):
-    """reader -> density -> CVT sites -> Delaunay -> triangle gray -> graph cut -> boundary,
+    """reader -> streak correction -> density -> CVT sites -> Delaunay -> triangle gray -> graph cut -> boundary,
     each stage's output compared with the ctseg function on the same arrays."""
     from vtkmodules.util import numpy_support
 
-    img, _ = disc_image(48, noise=4.0)
+    img = make_phantom(96, seed=0).image.astype(float)  # steel: the streak stage acts
     reader = _vti_reader(tmp_path, img)
+    streaks = MetalStreakFilter()
+    streaks.SetInputConnection(reader.GetOutputPort())
     dens = DensityMapFilter()
-    dens.SetInputConnection(reader.GetOutputPort())
+    dens.SetInputConnection(streaks.GetOutputPort())
     sites = CVTSitesFilter()
-    sites.SetNumberOfSites(60)
+    sites.SetNumberOfSites(150)
     sites.SetInputConnection(dens.GetOutputPort())
     mesh = DelaunayMeshFilter()
     mesh.SetInputConnection(sites.GetOutputPort())
     gray = TriangleGrayFilter()
     gray.SetInputConnection(0, mesh.GetOutputPort())
-    gray.SetInputConnection(1, reader.GetOutputPort())
+    gray.SetInputConnection(1, streaks.GetOutputPort())
     cut = GraphCutSegmentFilter()
     cut.SetInputConnection(0, gray.GetOutputPort())
-    cut.SetInputConnection(1, reader.GetOutputPort())
+    cut.SetInputConnection(1, streaks.GetOutputPort())
     bnd = MaterialBoundaryFilter()
     bnd.SetInputConnection(cut.GetOutputPort())
     out = _write_and_reread(tmp_path, cut.GetOutputPort())
     bnd.Update()
-    for f in (dens, sites, mesh, gray, cut, bnd):
+    for f in (streaks, dens, sites, mesh, gray, cut, bnd):
         assert f.last_error is None, (type(f).__name__, f.last_error)
 
-    ref = ctseg.segment_image(img, n_sites=60)
+    ref = ctseg.segment_image(img, n_sites=150)
+    fd = streaks.GetOutput().GetFieldData()
+    assert fd.GetArray("streak_weight").GetValue(0) == ref.diagnostics["streak_correction"]["weight"] > 0
+    corrected = numpy_support.vtk_to_numpy(streaks.GetOutput().GetPointData().GetScalars())
+    np.testing.assert_array_equal(corrected.reshape(img.shape), ref.corrected_image)
+    original = numpy_support.vtk_to_numpy(streaks.GetOutput().GetPointData().GetArray("original"))
+    np.testing.assert_array_equal(original.reshape(img.shape), img)
     rho = numpy_support.vtk_to_numpy(dens.GetOutput().GetPointData().GetArray("density"))
     np.testing.assert_array_equal(rho.reshape(img.shape), ref.density)
     s_pts, _, _ = polydata_to_arrays(sites.GetOutput())
-    cvt = ctseg.lloyd_cvt(ref.density, ctseg.ward_sites(ref.density, 60))
+    cvt = ctseg.lloyd_cvt(ref.density, ctseg.ward_sites(ref.density, 150))
     np.testing.assert_allclose(s_pts, _world(cvt.sites), atol=1e-9)
     energy = numpy_support.vtk_to_numpy(sites.GetOutput().GetFieldData().GetArray("cvt_energy"))
     np.testing.assert_allclose(energy, ref.diagnostics["cvt_energy"])

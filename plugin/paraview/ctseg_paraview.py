@@ -5,14 +5,14 @@ Load it with Tools > Manage Plugins > Load New... (this file), or put this folde
 PV_PLUGIN_PATH. ParaView's Python must be able to import ctseg and its dependencies (see
 the README's ParaView section). This file only declares the ParaView proxies: every filter
 is a ``ctseg.filters`` class, unchanged; the algorithms live in ``ctseg``. In
-``paraview.simple`` the filters are CTSegment, CTDensityMap, CTCVTSites, CTDelaunayMesh,
+``paraview.simple`` the filters are CTSegment, CTMetalStreaks, CTDensityMap, CTCVTSites, CTDelaunayMesh,
 CTTriangleGray, CTGraphCut and CTMaterialBoundary.
 """
 from paraview.util.vtkAlgorithm import smdomain, smhint, smproperty, smproxy
 
 from ctseg.filters import (CTSegmentFilter, CVTSitesFilter, DelaunayMeshFilter,
                            DensityMapFilter, GraphCutSegmentFilter, MaterialBoundaryFilter,
-                           TriangleGrayFilter)
+                           MetalStreakFilter, TriangleGrayFilter)
 
 MENU = '<ShowInMenu category="ctseg"/>'
 AXES = ("z", "y", "x")
@@ -155,6 +155,15 @@ class CTSegment(CTSegmentFilter):
     SetStreakCorrection = _int("StreakCorrection", 1, 0, 1, "First remove the dark "
                                "beam-hardening streaks next to metal (not the paper's).",
                                lambda self, v: self.SetParameter("streak_correction", bool(v)))
+
+
+@_stage("CTMetalStreaks", "CT Metal Streaks", ("Input", 0, "vtkImageData"))
+class CTMetalStreaks(MetalStreakFilter):
+    """First stage (not in the paper): the slice with the beam-hardening streaks of its
+    densest material removed; the input values kept as an 'original' point array."""
+
+    SetSigma = _double("Sigma", 1.0, 0.0, 10.0, "Gaussian smoothing before pixels are "
+                       "classified, pixels.", MetalStreakFilter.SetSigma)
 
 
 @_stage("CTDensityMap", "CT Density Map", ("Input", 0, "vtkImageData"))
