@@ -144,8 +144,9 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
                   levels_255=None, progress=None):
     """Segment a 2D gray image into a triangle mesh with one material per triangle.
 
-    [metal streak correction (not in the paper)] -> density map (SPEC 1) -> initial sites (SPEC 2) -> Lloyd CVT (SPEC 3) -> Delaunay mesh
-    (SPEC 4) -> triangle gray (SPEC 5) -> recursive graph cut (SPEC 6-7).
+    [metal streak correction (not in the paper)] -> density map (SPEC 1) -> initial sites
+    (SPEC 2) -> Lloyd CVT (SPEC 3) -> Delaunay mesh (SPEC 4) -> triangle gray (SPEC 5) ->
+    recursive graph cut (SPEC 6-7).
 
     Parameters
     ----------
@@ -312,14 +313,13 @@ def correct_streaks(image, gray_scale=None, levels_255=None, *, sigma=1.0, densi
     img = as_image(image)
     flat = flat_pixels(img, sigma, density_floor, density_saturation)
     if levels_255 is not None and gray_scale is not None:
-        offset, factor = gray_scale
-        levels = np.asarray(levels_255, float) / factor + offset if factor else np.array([offset])
+        levels255, (offset, factor) = np.asarray(levels_255, float), gray_scale
     else:
         # material_levels' own way, with the flat pixels computed once for both uses
         g255, (offset, factor) = rescale_gray(img, scale=gray_scale)
-        levels_raw = pixel_material_levels(g255, flat, merge_k=merge_k, merge_rel=merge_rel,
-                                           merge_floor=merge_floor, n_materials=n_materials)[0]
-        levels = levels_raw / factor + offset if factor else np.array([offset])
+        levels255 = pixel_material_levels(g255, flat, merge_k=merge_k, merge_rel=merge_rel,
+                                          merge_floor=merge_floor, n_materials=n_materials)[0]
+    levels = levels255 / factor + offset if factor else np.array([offset])
     return correct_metal_streaks(img, levels, flat=flat, sigma=sigma)
 
 
