@@ -61,8 +61,8 @@ class VolumeSegmentation:
     ----------
     slices : list of SegmentedMesh
         One per slice along ``axis``, in slice order; material k means the same material in
-        every slice. The per-pixel maps (``density``, ``cvt_labels``, ``corrected_image``) are dropped to keep
-        memory bounded.
+        every slice. The per-pixel maps (``density``, ``cvt_labels``, ``corrected_image``)
+        are dropped to keep memory bounded.
     axis : int
         Numpy axis of the (nz, ny, nx) volume that was sliced.
     material_gray : (K,) ndarray

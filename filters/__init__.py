@@ -20,5 +20,6 @@ __all__ = ["ImageGeometry", "image_to_array", "array_to_image", "mesh_to_polydat
            "boundary_to_polydata", "append_polydata", "segmentation_to_polydata",
            "polydata_to_arrays", "read_image", "SUPPORTED_INPUTS", "write_mesh",
            "write_polydata", "read_polydata", "MESH_FORMATS", "CTSegAlgorithm",
-           "MetalStreakFilter", "DensityMapFilter", "CVTSitesFilter", "DelaunayMeshFilter", "TriangleGrayFilter",
-           "GraphCutSegmentFilter", "MaterialBoundaryFilter", "CTSegmentFilter"]
+           "MetalStreakFilter", "DensityMapFilter", "CVTSitesFilter", "DelaunayMeshFilter",
+           "TriangleGrayFilter", "GraphCutSegmentFilter", "MaterialBoundaryFilter",
+           "CTSegmentFilter"]

@@ -1,7 +1,7 @@
 """The paper's Fig. 5 rendered with VTK offscreen (no display, no matplotlib): six panels of
 one slice -- input, density map, CVT regions with sites, Delaunay mesh over the image (the
-streak-corrected one when the correction changed it), mesh
-coloured by material, material boundaries over the input."""
+streak-corrected one when the correction changed it), mesh coloured by material, material
+boundaries over the input."""
 import os
 
 import numpy as np
@@ -183,7 +183,7 @@ def render_figure(path, image, seg, title=None):
     n_mat = int(seg.n_materials)
     edges = _edges(seg.triangles)
     n_regions = int(seg.cvt_labels.max()) + 1
-    corrected = getattr(seg, "corrected_image", None)
+    corrected = seg.corrected_image
     panels = [
         ("input", [_image_actor(img, (lo, hi))]),
         ("density map", [_image_actor(seg.density, (seg.density.min(), seg.density.max()))]),
