@@ -63,12 +63,14 @@ def test_corners_fixed_and_border_sites_on_border(cvt_run):
     rows, cols = rho.shape
     for corner in [(0, 0), (cols - 1, 0), (0, rows - 1), (cols - 1, rows - 1)]:
         assert np.any(np.all(r.sites == corner, axis=1))
-    # regions that hold border pixels keep their site on a border line (rule 2)
+    # the border lines are served mostly by border sites (rule 2; sites are added there,
+    # and a free site whose region reaches the border later is the exception)
     lab = r.labels
-    border_regions = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
-    s = r.sites[border_regions]
+    s = r.sites
     on_line = (s[:, 0] == 0) | (s[:, 0] == cols - 1) | (s[:, 1] == 0) | (s[:, 1] == rows - 1)
-    assert on_line.mean() > 0.9
+    for line in (lab[0], lab[-1], lab[:, 0], lab[:, -1]):
+        assert on_line[line].mean() > 0.7
+    border_regions = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
     # and no interior region's site sits on the border
     inner = np.setdiff1d(np.arange(len(r.sites)), border_regions)
     si = r.sites[inner]
@@ -88,3 +90,20 @@ def test_bad_inputs():
         lloyd_cvt(rho, np.array([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0], [20.0, 1.0]]))
     with pytest.raises(ParameterError):
         lloyd_cvt(rho, np.random.default_rng(0).uniform(0, 9, (6, 2)), tol=0)
+
+
+def test_no_site_left_a_hair_from_another():
+    # found by hypothesis: a free site whose region is one run of bottom-border pixels
+    # ended 4e-16 px from a border site, and Qhull dropped it from the triangulation
+    row = [100., 150., 150., 100., 150., 150., 150., 0., 50., 100., 50., 50., 100., 150.]
+    img = np.array([row] * 4)
+    from ctseg import segment_image
+    from ctseg.sites import initial_sites
+    rho = density_map(img)
+    r = lloyd_cvt(rho, initial_sites(rho, 24, method="ward"))
+    d = np.hypot(*(r.sites[:, None, :] - r.sites[None, :, :]).transpose(2, 0, 1))
+    assert d[np.triu_indices(len(r.sites), 1)].min() > 1e-3
+    px = np.column_stack([c.ravel() for c in np.mgrid[0:4, 0:14][::-1]]).astype(float)
+    assert np.array_equal(r.labels.ravel(), nearest_site(px, r.sites))
+    seg = segment_image(img, n_sites=24)  # every site a vertex of the mesh
+    assert len(np.unique(seg.triangles)) == len(seg.points)
