@@ -79,7 +79,8 @@ def _mesh(args):
     show = sys.stderr.isatty() and not args.quiet
     progress = _progress_printer(show)
     common = dict(n_sites=args.sites, seed=args.seed, n_materials=args.materials,
-                  streak_correction=not args.no_streak_correction)
+                  streak_correction=not args.no_streak_correction,
+                  blur_correction=not args.no_blur_correction)
     if image.ndim == 2:
         if args.resume:
             print("ctseg: note: --resume applies to volumes, whose slices are saved as they "
@@ -220,6 +221,10 @@ def build_parser():
     m.add_argument("--no-streak-correction", action="store_true",
                    help="segment the image as it is: skip the removal of the dark beam-hardening "
                         "streaks next to metal (on by default; its fitted weight is in the report)")
+    m.add_argument("--no-blur-correction", action="store_true",
+                   help="label the triangles once: skip taking off the edge blur the first "
+                        "labelling predicts before labelling again (on by default; the fitted "
+                        "blur, px, is the report's blur_px)")
     m.add_argument("--report", help="write all diagnostics as JSON")
     m.add_argument("--figure", help="write the six-panel figure (PNG; a volume's middle slice)")
     m.add_argument("--truth", help="ground-truth labels (same shape) to report Dice against")

@@ -7,6 +7,7 @@ import numpy as np
 
 from ._validate import as_image, check_number
 from .beam_hardening import correct_metal_streaks
+from .blur import blur_corrected_gray, region_levels
 from .boundary import chain_polylines, material_boundary
 from .cvt import lloyd_cvt
 from .density import density_map
@@ -140,13 +141,14 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
                   merge_k=5.0, merge_rel=0.2, merge_floor=2.0, merge_threshold=None,
                   n_materials=None, theta=None, lam=70.0, beta=0.286, min_triangles=2,
                   max_depth=32, min_material_area=None, min_pocket_area=4.0,
-                  weight_by_edge_length=False, streak_correction=True, gray_scale=None,
-                  levels_255=None, progress=None):
+                  weight_by_edge_length=False, streak_correction=True, blur_correction=True,
+                  gray_scale=None, levels_255=None, progress=None):
     """Segment a 2D gray image into a triangle mesh with one material per triangle.
 
     [metal streak correction (not in the paper)] -> density map (SPEC 1) -> initial sites
     (SPEC 2) -> Lloyd CVT (SPEC 3) -> Delaunay mesh (SPEC 4) -> triangle gray (SPEC 5) ->
-    recursive graph cut (SPEC 6-7).
+    recursive graph cut (SPEC 6-7) [-> blur correction of the grays and the graph cut
+    again (not in the paper)].
 
     Parameters
     ----------
@@ -175,6 +177,11 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         (:func:`ctseg.beam_hardening.correct_metal_streaks`; not in the paper). Every later
         stage, and the reported ``gray``, then use the corrected image; the fitted weight
         is in ``diagnostics["streak_correction"]``.
+    blur_correction : bool
+        After the first labelling, take off the grays the smear of the scanner's
+        point-spread function that this labelling predicts, and label again
+        (:func:`ctseg.blur.blur_corrected_gray`; not in the paper). The reported ``gray``
+        is the measured one; the fitted blur is ``diagnostics["blur_px"]``.
     gray_scale : (offset, factor), optional
         Map of gray values onto 0-255 found elsewhere (a whole volume's,
         :func:`ctseg.intensity.gray_scale`); default: this image's percentiles.
@@ -252,8 +259,12 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
                         n_materials=n_materials, theta=theta, lam=lam, beta=beta,
                         min_triangles=min_triangles, max_depth=max_depth,
                         min_material_area=min_material_area, min_pocket_area=min_pocket_area,
-                        weight_by_edge_length=weight_by_edge_length)
-    times["graphcut"] = time.perf_counter() - t0
+                        weight_by_edge_length=weight_by_edge_length,
+                        blur_correction=blur_correction)
+    blur_s = labels.times_s.get("blur_correction", 0.0)
+    times["graphcut"] = time.perf_counter() - t0 - blur_s  # both cuts and the levels
+    if labels.blur_px is not None:
+        times["blur_correction"] = blur_s
     material, mat_gray = labels.material, labels.material_gray
     bedges, bsides = timed("boundary", 0.99, material_boundary, mesh.shared_edges,
                            mesh.adjacency, material)
@@ -282,6 +293,7 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         "recursion_depth": int(seg.max_depth_reached),
         "material_gray": [float(v) for v in mat_gray],
         "streak_correction": streaks.summary() if streaks else None,
+        "blur_px": labels.blur_px,
     }
     return SegmentedMesh(points=mesh.points, triangles=mesh.triangles, material=material,
                          gray=gray, boundary_edges=bedges, boundary_sides=bsides,
@@ -327,13 +339,17 @@ def correct_streaks(image, gray_scale=None, levels_255=None, *, sigma=1.0, densi
 class MeshLabels:
     """Outcome of :func:`label_mesh`: ``material`` per triangle, ``material_gray`` (input
     units), the ``levels_255`` used, the pixel noise ``pixel_sigma`` (0-255 scale; 0 when
-    the levels were given) and the raw :class:`ctseg.materials.MaterialSegmentation`."""
+    the levels were given), the raw :class:`ctseg.materials.MaterialSegmentation`, the
+    fitted blur ``blur_px`` (None without blur correction) and ``times_s``, the seconds
+    spent in the blur correction ('blur_correction'; the graph cuts are the rest)."""
 
     material: np.ndarray
     material_gray: np.ndarray
     levels_255: np.ndarray
     pixel_sigma: float
     segmentation: object
+    blur_px: object = None
+    times_s: dict = field(default_factory=dict)
 
 
 def label_mesh(image, mesh, gray, *, scale=None, levels_255=None, sigma=1.0,
@@ -341,12 +357,14 @@ def label_mesh(image, mesh, gray, *, scale=None, levels_255=None, sigma=1.0,
                merge_k=5.0, merge_rel=0.2, merge_floor=2.0, merge_threshold=None,
                n_materials=None, theta=None, lam=70.0, beta=0.286, min_triangles=2,
                max_depth=32, min_material_area=None, min_pocket_area=4.0,
-               weight_by_edge_length=False):
+               weight_by_edge_length=False, blur_correction=True):
     """One material per triangle of a mesh over an image (SPEC 6-7): the last stage.
 
     Material levels come from the image's flat pixels (:func:`material_levels`) unless
     ``levels_255`` gives them; then the recursive graph cut
-    (:func:`ctseg.materials.segment_triangles`) labels the triangles.
+    (:func:`ctseg.materials.segment_triangles`) labels the triangles. With
+    ``blur_correction``, the grays are then corrected for the blur this labelling predicts
+    (:func:`ctseg.blur.blur_corrected_gray`) and the graph cut labels them again.
 
     Parameters
     ----------
@@ -404,13 +422,23 @@ def label_mesh(image, mesh, gray, *, scale=None, levels_255=None, sigma=1.0,
             img, scale, sigma=sigma, density_floor=density_floor,
             density_saturation=density_saturation, merge_k=merge_k, merge_rel=merge_rel,
             merge_floor=merge_floor, n_materials=n_materials)
-    seg = segment_triangles(f255, area, mesh.adjacency, cent, levels=levels,
-                            step_threshold=step_threshold, merge_k=merge_k, merge_rel=merge_rel,
-                            merge_floor=merge_floor, merge_threshold=merge_threshold,
-                            min_triangles=min_triangles, max_depth=max_depth,
-                            min_material_area=min_material_area,
-                            min_pocket_area=min_pocket_area, theta=theta, lam=lam, beta=beta,
-                            edge_length=edge_len)
+    params = dict(step_threshold=step_threshold, merge_k=merge_k, merge_rel=merge_rel,
+                  merge_floor=merge_floor, merge_threshold=merge_threshold,
+                  min_triangles=min_triangles, max_depth=max_depth,
+                  min_material_area=min_material_area, min_pocket_area=min_pocket_area,
+                  theta=theta, lam=lam, beta=beta, edge_length=edge_len)
+    seg = segment_triangles(f255, area, mesh.adjacency, cent, levels=levels, **params)
+    times = {}
+    blur_px = None
+    if blur_correction and len(seg.mode_gray) > 1:
+        t0 = time.perf_counter()
+        # in 0-255 units like f255; the image unclipped (f255's clip only bounds outliers)
+        level = region_levels(seg.material, f255, area, mesh.adjacency)
+        f_sharp, blur_px = blur_corrected_gray(f255, mesh.points, mesh.triangles, level,
+                                               (img - offset) * factor)
+        times["blur_correction"] = time.perf_counter() - t0
+        seg = segment_triangles(np.clip(f_sharp, 0.0, 255.0), area, mesh.adjacency, cent,
+                                levels=levels, **params)
     if fixed:
         # one numbering for every slice: the index of the level the material was cut at
         material = np.searchsorted(levels, seg.mode_gray)[seg.material]
@@ -420,7 +448,8 @@ def label_mesh(image, mesh, gray, *, scale=None, levels_255=None, sigma=1.0,
         material, mat_gray, _ = order_by_gray(seg.material, gray, area)
     return MeshLabels(material=material.astype(np.int64), material_gray=np.asarray(mat_gray, float),
                       levels_255=seg.mode_gray if not fixed else levels,
-                      pixel_sigma=float(pixel_sigma), segmentation=seg)
+                      pixel_sigma=float(pixel_sigma), segmentation=seg, blur_px=blur_px,
+                      times_s=times)
 
 
 SEGMENT_DEFAULTS = {name: p.default for name, p in inspect.signature(segment_image).parameters.items()

@@ -155,6 +155,9 @@ class CTSegment(CTSegmentFilter):
     SetStreakCorrection = _int("StreakCorrection", 1, 0, 1, "First remove the dark "
                                "beam-hardening streaks next to metal (not the paper's).",
                                lambda self, v: self.SetParameter("streak_correction", bool(v)))
+    SetBlurCorrection = _int("BlurCorrection", 1, 0, 1, "Take off the edge blur the first "
+                             "labelling predicts and label again (not the paper's).",
+                             lambda self, v: self.SetParameter("blur_correction", bool(v)))
 
 
 @_stage("CTMetalStreaks", "CT Metal Streaks", ("Input", 0, "vtkImageData"))

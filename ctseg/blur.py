@@ -1,0 +1,243 @@
+"""Blur correction of the triangle grays before the final labelling (not in the paper).
+
+A reconstructed slice is the material map seen through the scanner's point-spread function
+(detector, focal spot, reconstruction filter): every edge is smeared over a pixel or two.
+Next to steel, whose gray is ten times the others', that tail alone lifts a 3-5 px air gap
+to a polymer's gray, and triangles that touch the metal read too bright; a thin triangle
+loses part of its own signal to its neighbours. Once a first labelling exists, the smear
+it predicts can be taken off: with ``L`` the image of the labelled levels and ``G`` a
+Gaussian point-spread function fitted to the image, a triangle reads ``mean(G * L)`` where
+its level is, and a change of its own level by ``d`` changes what it reads by ``w d``
+(``w < 1``: the share of its own signal the blur leaves in it). The level that explains
+what it reads is therefore ``level + (gray - mean(G * L)) / w``; the triangles are labelled
+once more with those grays.
+"""
+import numpy as np
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ._validate import as_image, check_number
+from .errors import ParameterError
+from .triangle_gray import pixel_overlaps, triangle_gray
+
+MAX_BLUR_PX = 3.0
+"""Largest point-spread standard deviation :func:`estimate_blur` considers (px)."""
+
+MIN_SELF_WEIGHT = 0.8
+"""Floor of the self weight in :func:`blur_corrected_gray`: a triangle's deviation from its
+predicted gray is amplified at most 1 / 0.8 = 1.25 times. Thin triangles' grays are noisy
+and their predicted blur least certain. On 39 simulated 512 px slices (seeds 0-14, 20-23,
+40-59) the smallest per-material Dice was 0.963, 0.966, 0.971, 0.970 and 0.960 with floors
+0.3, 0.6, 0.7, 0.8 and 1 (no amplification); 0.7 and 0.8 are alike, 0.8 amplifies less."""
+
+
+def region_levels(material, gray, area, adjacency):
+    """Gray of each triangle's region: the area-weighted median gray of the connected
+    triangles of its material it belongs to.
+
+    The median ignores the region's edge triangles, which are mixed with the neighbours;
+    a region's own value (not its material's level) keeps a region that reads darker
+    than its material, such as the cap of a steel ball cut by the slice, from predicting
+    a blur it does not cause.
+
+    Parameters
+    ----------
+    material : (m,) int array_like
+    gray : (m,) array_like
+    area : (m,) array_like
+    adjacency : (k, 2) int array_like
+        Pairs of triangles sharing an edge.
+
+    Returns
+    -------
+    (m,) float64 ndarray
+    """
+    material = np.asarray(material)
+    gray = np.asarray(gray, float)
+    area = np.asarray(area, float)
+    adjacency = np.asarray(adjacency, np.int64).reshape(-1, 2)
+    m = len(material)
+    same = material[adjacency[:, 0]] == material[adjacency[:, 1]]
+    a, b = adjacency[same, 0], adjacency[same, 1]
+    _, region = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)),
+                                     directed=False)
+    order = np.lexsort((gray, region))
+    reg, w = region[order], area[order]
+    cum = np.cumsum(w)
+    start = np.searchsorted(reg, reg, side="left")
+    before = np.where(start > 0, cum[start - 1], 0.0)
+    total = np.bincount(reg, w)[reg]
+    # first triangle of each region whose cumulative weight reaches half the region's
+    half = (cum - before) >= 0.5 * total
+    first = np.zeros(len(reg), bool)
+    first[half] = True
+    first[1:] &= ~(half[:-1] & (reg[1:] == reg[:-1]))
+    median = np.empty(region.max() + 1)
+    median[reg[first]] = gray[order][first]
+    return median[region]
+
+
+def level_image(points, triangles, level, shape):
+    """Rasterise one gray level per triangle: each pixel takes the area-weighted mean of
+    the levels of the triangles over it (partial coverage kept, as a scanner would see it).
+
+    Parameters
+    ----------
+    points : (n, 2) array_like
+        Mesh vertices (x, y) in pixel units.
+    triangles : (m, 3) array_like
+    level : (m,) array_like
+        Gray of each triangle's material.
+    shape : (rows, cols)
+
+    Returns
+    -------
+    (rows, cols) float64 ndarray
+        Pixels no triangle overlaps hold the nearest covered pixel's value.
+    """
+    level = np.asarray(level, float)
+    if level.shape != (len(triangles),):
+        raise ParameterError(f"level: expected one value per triangle ({len(triangles)}), "
+                             f"got shape {level.shape}")
+    rows, cols = int(shape[0]), int(shape[1])
+    t, p, a = pixel_overlaps(points, triangles, (rows, cols))
+    cover = np.bincount(p, a, rows * cols)
+    out = (np.bincount(p, a * level[t], rows * cols) / np.maximum(cover, 1e-300)).reshape(rows, cols)
+    empty = (cover <= 0).reshape(rows, cols)
+    if empty.any() and not empty.all():
+        idx = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
+        out = out[tuple(idx)]
+    return out
+
+
+def estimate_blur(image, levels_image, band_px=3, max_px=MAX_BLUR_PX):
+    """Standard deviation (px) of the Gaussian that best turns a level image into the image.
+
+    Minimises the mean squared difference between ``image`` and
+    ``gaussian_filter(levels_image, s)`` over the pixels within ``band_px`` of a level
+    change (elsewhere blur changes nothing and only noise is compared): a grid of 0.2 px
+    steps on [0, ``max_px``], refined by a parabola through the best point and its
+    neighbours.
+
+    Parameters
+    ----------
+    image : (rows, cols) array_like
+        The slice, in the same units as the levels.
+    levels_image : (rows, cols) array_like
+        What the slice would be without blur (:func:`level_image` of a labelling).
+    band_px : int
+        Half width of the band around level changes.
+    max_px : float
+        Upper end of the search.
+
+    Returns
+    -------
+    sigma : float
+        In [0, max_px]; 0 when the level image has no edge.
+
+    Raises
+    ------
+    InputError
+        If either image is not a finite 2D array.
+    ParameterError
+        If the shapes differ or ``band_px``, ``max_px`` are out of range.
+    """
+    img = as_image(image)
+    lev = as_image(levels_image, "levels_image")
+    if lev.shape != img.shape:
+        raise ParameterError(f"levels_image: shape {lev.shape} differs from the image's {img.shape}")
+    band_px = check_number(band_px, "band_px", low=1, integer=True)
+    max_px = check_number(max_px, "max_px", low=0.0, low_open=True)
+    change = (ndimage.maximum_filter(lev, 3, mode="nearest")
+              - ndimage.minimum_filter(lev, 3, mode="nearest")) > 0
+    if not change.any():
+        return 0.0
+    band = ndimage.binary_dilation(change, iterations=band_px)
+    grid = np.arange(0.0, max_px + 1e-9, 0.2)
+
+    def misfit(s):
+        model = ndimage.gaussian_filter(lev, s, mode="nearest") if s > 0 else lev
+        return float(np.mean((img[band] - model[band]) ** 2))
+
+    cost = np.array([misfit(s) for s in grid])
+    k = int(np.argmin(cost))
+    if 0 < k < len(grid) - 1:
+        c0, c1, c2 = cost[k - 1:k + 2]
+        curv = c0 - 2.0 * c1 + c2
+        if curv > 0:
+            return float(grid[k] + 0.1 * (c0 - c2) / curv)  # vertex of the parabola (h = 0.2)
+    return float(grid[k])
+
+
+def self_weight(points, triangles, sigma):
+    """Share of a triangle's own signal that a Gaussian blur leaves inside it.
+
+    ``1 - P sigma / (sqrt(2 pi) A)`` for perimeter P and area A: across a straight edge a
+    Gaussian of standard deviation sigma carries ``sigma / sqrt(2 pi)`` per unit length
+    out (exact for edges long against sigma; corners make it a slight overestimate of the
+    loss). Negative for slivers thinner than the blur; callers put a floor under it.
+
+    Parameters
+    ----------
+    points : (n, 2) array_like
+    triangles : (m, 3) array_like
+    sigma : float
+        Blur standard deviation, px.
+
+    Returns
+    -------
+    (m,) float64 ndarray
+    """
+    p = np.asarray(points, float)[np.asarray(triangles, np.int64)]
+    perimeter = sum(np.hypot(*(p[:, (i + 1) % 3] - p[:, i]).T) for i in range(3))
+    area = 0.5 * np.abs((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                        - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+    return 1.0 - perimeter * float(sigma) / (np.sqrt(2.0 * np.pi) * np.maximum(area, 1e-300))
+
+
+def blur_corrected_gray(gray, points, triangles, level, image, sigma=None,
+                        min_self_weight=MIN_SELF_WEIGHT):
+    """Triangle grays with the blur a labelling predicts taken off.
+
+    ``level + (gray - mean_t(G_sigma * L)) / w``, where ``L = level_image(level)``,
+    ``mean_t`` is the exact area-weighted mean over triangle t (as ``gray`` was measured)
+    and ``w = max(self_weight, min_self_weight)``. If the image is exactly ``G_sigma * L``,
+    every triangle gets back its level.
+
+    Parameters
+    ----------
+    gray : (m,) array_like
+        Triangle mean grays (:func:`ctseg.triangle_gray`), the units of ``image``.
+    points, triangles
+        The mesh.
+    level : (m,) array_like
+        Level of each triangle's material in a first labelling.
+    image : (rows, cols) array_like
+        The slice the grays were measured on (for ``sigma``).
+    sigma : float, optional
+        Point-spread standard deviation (px); default :func:`estimate_blur`.
+    min_self_weight : float
+        Floor of the self weight, in (0, 1] (1: no amplification).
+
+    Returns
+    -------
+    corrected : (m,) ndarray
+    sigma : float
+        The standard deviation used.
+    """
+    img = as_image(image)
+    min_self_weight = check_number(min_self_weight, "min_self_weight", low=0.0, high=1.0,
+                                   low_open=True)
+    gray = np.asarray(gray, float)
+    if gray.shape != (len(triangles),):
+        raise ParameterError(f"gray: expected one value per triangle ({len(triangles)}), "
+                             f"got shape {gray.shape}")
+    lev = level_image(points, triangles, level, img.shape)
+    if sigma is None:
+        sigma = estimate_blur(img, lev)
+    sigma = check_number(sigma, "sigma", low=0.0)
+    blurred = ndimage.gaussian_filter(lev, sigma, mode="nearest") if sigma > 0 else lev
+    predicted = triangle_gray(blurred, points, triangles)
+    w = np.maximum(self_weight(points, triangles, sigma), min_self_weight)
+    return np.asarray(level, float) + (gray - predicted) / w, float(sigma)
