@@ -19,7 +19,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ._validate import as_image, check_number
 from .errors import ParameterError
-from .triangle_gray import pixel_overlaps
+from .triangle_gray import pixel_mean_of_triangles, triangle_gray
 
 MAX_BLUR_PX = 3.0
 """Largest point-spread standard deviation :func:`estimate_blur` considers (px)."""
@@ -78,7 +78,7 @@ def region_levels(material, gray, area, adjacency):
     return median[region]
 
 
-def level_image(points, triangles, level, shape, overlaps=None):
+def level_image(points, triangles, level, shape):
     """Rasterise one gray level per triangle: each pixel takes the area-weighted mean of
     the levels of the triangles over it (partial coverage kept, as a scanner would see it).
 
@@ -90,8 +90,6 @@ def level_image(points, triangles, level, shape, overlaps=None):
     level : (m,) array_like
         Gray of each triangle's material.
     shape : (rows, cols)
-    overlaps : (tri, pix, area), optional
-        :func:`ctseg.triangle_gray.pixel_overlaps` of this mesh, if already computed.
 
     Returns
     -------
@@ -102,11 +100,8 @@ def level_image(points, triangles, level, shape, overlaps=None):
     if level.shape != (len(triangles),):
         raise ParameterError(f"level: expected one value per triangle ({len(triangles)}), "
                              f"got shape {level.shape}")
-    rows, cols = int(shape[0]), int(shape[1])
-    t, p, a = overlaps if overlaps is not None else pixel_overlaps(points, triangles, (rows, cols))
-    cover = np.bincount(p, a, rows * cols)
-    out = (np.bincount(p, a * level[t], rows * cols) / np.maximum(cover, 1e-300)).reshape(rows, cols)
-    empty = (cover <= 0).reshape(rows, cols)
+    out, covered = pixel_mean_of_triangles(level, points, triangles, shape)
+    empty = covered <= 0
     if empty.any() and not empty.all():
         idx = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
         out = out[tuple(idx)]
@@ -243,13 +238,11 @@ def blur_corrected_gray(gray, points, triangles, level, image, sigma=None,
     if gray.shape != (len(triangles),):
         raise ParameterError(f"gray: expected one value per triangle ({len(triangles)}), "
                              f"got shape {gray.shape}")
-    t, p, a = overlaps = pixel_overlaps(points, triangles, img.shape)
-    lev = level_image(points, triangles, level, img.shape, overlaps)
+    lev = level_image(points, triangles, level, img.shape)
     if sigma is None:
         sigma = estimate_blur(img, lev)
     sigma = check_number(sigma, "sigma", low=0.0)
     blurred = ndimage.gaussian_filter(lev, sigma, mode="nearest") if sigma > 0 else lev
-    # the area-weighted mean over each triangle, as triangle_gray measures it
-    predicted = np.bincount(t, a * blurred.ravel()[p], len(gray)) / np.bincount(t, a, len(gray))
+    predicted = triangle_gray(blurred, points, triangles)
     w = np.maximum(self_weight(points, triangles, sigma), min_self_weight)
     return np.asarray(level, float) + (gray - predicted) / w, float(sigma)

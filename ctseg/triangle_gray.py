@@ -36,11 +36,48 @@ def pixel_overlaps(points, triangles, shape):
     P = _corners(points, triangles)
     rows, cols = int(shape[0]), int(shape[1])
     empty = np.zeros(0)
-    k = _overlaps(P, rows, cols, empty, np.zeros(0, np.int64), np.zeros(0, np.int64), empty,
-                  empty, empty)
+    none = np.zeros(0, np.int64)
+    k = _overlaps(P, rows, cols, empty, none, none, empty, empty, empty, empty, empty, empty)
     t, p, a = np.empty(k, np.int64), np.empty(k, np.int64), np.empty(k)
-    _overlaps(P, rows, cols, empty, t, p, a, empty, empty)
+    _overlaps(P, rows, cols, empty, t, p, a, empty, empty, empty, empty, empty)
     return t, p, a
+
+
+def pixel_mean_of_triangles(values, points, triangles, shape):
+    """Per pixel, the area-weighted mean of the values of the triangles over it.
+
+    The transpose of :func:`triangle_gray`, on the same exact overlaps
+    (:func:`pixel_overlaps`), without holding them all in memory.
+
+    Parameters
+    ----------
+    values : (m,) array_like
+        One value per triangle.
+    points : (n, 2) array_like
+    triangles : (m, 3) int array_like
+    shape : (rows, cols)
+
+    Returns
+    -------
+    mean : (rows, cols) float64 ndarray
+        0 where no triangle overlaps the pixel.
+    covered : (rows, cols) float64 ndarray
+        Area of each pixel covered by the triangles (1 inside, 1/2 on the border lines,
+        1/4 at the corners for a mesh over the whole image).
+    """
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    if values.shape != (len(triangles),):
+        raise InputError(f"values: expected one per triangle ({len(triangles)}), got shape "
+                         f"{values.shape}")
+    P = _corners(points, triangles)
+    rows, cols = int(shape[0]), int(shape[1])
+    empty = np.zeros(0)
+    none = np.zeros(0, np.int64)
+    covered = np.zeros(rows * cols)
+    weighted = np.zeros(rows * cols)
+    _overlaps(P, rows, cols, empty, none, none, empty, empty, empty, values, covered, weighted)
+    mean = np.divide(weighted, covered, out=np.zeros_like(weighted), where=covered > 0)
+    return mean.reshape(rows, cols), covered.reshape(rows, cols)
 
 
 def _corners(points, triangles):
@@ -99,12 +136,14 @@ def _clip_area(P, x0, x1, y0, y1):
 
 
 @njit(cache=True)
-def _overlaps(P, rows, cols, img, t_out, p_out, a_out, area, weighted):
+def _overlaps(P, rows, cols, img, t_out, p_out, a_out, area, weighted, values, pix_area,
+              pix_weighted):
     """Visit every (triangle, pixel) overlap of positive area.
 
-    With an image: add each overlap's area to ``area`` and area x gray to ``weighted``.
-    Else, with output arrays of the right length: fill them; else only count. Returns the
-    number of overlaps.
+    With an image: add each overlap's area to ``area`` and area x gray to ``weighted`` (per
+    triangle). With per-triangle ``values``: add each overlap's area to ``pix_area`` and
+    area x value to ``pix_weighted`` (per pixel). Else, with output arrays of the right
+    length: fill them; else only count. Returns the number of overlaps.
     """
     fill = t_out.shape[0] > 0
     count = 0
@@ -150,6 +189,9 @@ def _overlaps(P, rows, cols, img, t_out, p_out, a_out, area, weighted):
                 if img.shape[0] > 0:
                     area[t] += a
                     weighted[t] += a * img[r * cols + c]
+                elif values.shape[0] > 0:
+                    pix_area[r * cols + c] += a
+                    pix_weighted[r * cols + c] += a * values[t]
                 elif fill:
                     t_out[count] = t
                     p_out[count] = r * cols + c
@@ -199,8 +241,9 @@ def triangle_gray(image, points, triangles):
     P = _corners(pts, triangles)
     area = np.zeros(len(P))
     weighted = np.zeros(len(P))
-    _overlaps(P, rows, cols, np.ascontiguousarray(img.ravel()), np.zeros(0, np.int64),
-              np.zeros(0, np.int64), np.zeros(0), area, weighted)
+    none = np.zeros(0, np.int64)
+    _overlaps(P, rows, cols, np.ascontiguousarray(img.ravel()), none, none, np.zeros(0), area,
+              weighted, np.zeros(0), np.zeros(0), np.zeros(0))
     if np.any(area <= 0):
         raise InputError("triangles: a triangle covers no image area (degenerate?)")
     return weighted / area

@@ -106,3 +106,28 @@ def test_points_outside_image_rejected(small_mesh):
     (rows, cols), m = small_mesh
     with pytest.raises(InputError):
         triangle_gray(np.zeros((rows - 1, cols)), m.points, m.triangles)
+
+
+def test_pixel_mean_of_triangles_is_the_transpose_of_triangle_gray():
+    # sum over pixels of image x (triangle values rasterised, times coverage) equals sum over
+    # triangles of value x area x mean image gray: <I, R v> = <R^T I, v>
+    from ctseg import delaunay_mesh
+    from ctseg.triangle_gray import pixel_mean_of_triangles
+    from ctseg.triangulation import triangle_areas
+    rng = np.random.default_rng(4)
+    rows, cols = 20, 30
+    pts = np.vstack([[[0, 0], [cols - 1, 0], [0, rows - 1], [cols - 1, rows - 1]],
+                     rng.uniform([0.5, 0.5], [cols - 1.5, rows - 1.5], (40, 2))])
+    mesh = delaunay_mesh(pts)
+    values = rng.uniform(0, 9, len(mesh.triangles))
+    image = rng.uniform(0, 5, (rows, cols))
+    mean, covered = pixel_mean_of_triangles(values, mesh.points, mesh.triangles, (rows, cols))
+    lhs = np.sum(image * mean * covered)
+    rhs = np.sum(values * triangle_areas(mesh.points, mesh.triangles)
+                 * triangle_gray(image, mesh.points, mesh.triangles))
+    assert np.isclose(lhs, rhs, rtol=1e-12)
+    expect = np.ones((rows, cols))
+    expect[[0, -1], :] = 0.5
+    expect[:, [0, -1]] = 0.5
+    expect[[0, 0, -1, -1], [0, -1, 0, -1]] = 0.25
+    np.testing.assert_allclose(covered, expect, atol=1e-12)
