@@ -317,7 +317,7 @@ def plots(res, folder):
     if "stages" in res:
         fig, ax = plt.subplots(figsize=(8, 3.2))
         names = list(res["stages"][0]["stages_s"]) + ["write"]
-        colours = dict(zip(names, plt.get_cmap("tab10").colors))
+        colours = dict(zip(names, plt.get_cmap("tab20").colors))
         for i, r in enumerate(res["stages"]):
             left = 0.0
             for s, v in list(r["stages_s"].items()) + [("write", r["write_s"])]:
@@ -500,12 +500,12 @@ def main():
                                f"Python {platform.python_version()}"})
         run_sections(res, args)
     os.makedirs(args.out, exist_ok=True)
+    with open(saved, "w") as fh:  # first: the numbers outlive a failing plot
+        json.dump(res, fh, indent=1)
     files = plots(res, args.out)
     md = markdown(res)
     with open(os.path.join(args.out, "benchmark.md"), "w") as fh:
         fh.write(md + "\n")
-    with open(saved, "w") as fh:
-        json.dump(res, fh, indent=1)
     print(md)
     print("wrote", ", ".join([os.path.join(args.out, f) for f in ("benchmark.md", "benchmark.json")]
                              + files))
