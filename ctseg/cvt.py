@@ -15,7 +15,8 @@ class CVTResult:
     Attributes
     ----------
     sites : (n', 2) ndarray
-        Final sites, (x, y) = (col, row) pixel units; n' >= n (border sites added, see
+        Final sites, (x, y) = (col, row) pixel units; usually n' > n (border sites added; a
+        free site that ends on another site removed; see
         :func:`lloyd_cvt`).
     labels : (rows, cols) int ndarray
         Index of each pixel's nearest final site (its Voronoi region).

@@ -178,8 +178,8 @@ def segment_image(image, n_sites=None, seed=0, *, init="ward", sigma=1.0, densit
         stage, and the reported ``gray``, then use the corrected image; the fitted weight
         is in ``diagnostics["streak_correction"]``.
     blur_correction : bool
-        After the first labelling, take off the grays the smear of the scanner's
-        point-spread function that this labelling predicts, and label again
+        After the first labelling, correct the triangle grays for the smear of the
+        scanner's point-spread function that this labelling predicts, and label again
         (:func:`ctseg.blur.blur_corrected_gray`; not in the paper). The reported ``gray``
         is the measured one; the fitted blur is ``diagnostics["blur_px"]``.
     gray_scale : (offset, factor), optional
