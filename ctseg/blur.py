@@ -63,20 +63,15 @@ def region_levels(material, gray, area, adjacency):
     a, b = adjacency[same, 0], adjacency[same, 1]
     _, region = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)),
                                      directed=False)
-    order = np.lexsort((gray, region))
+    order = np.lexsort((gray, region))  # by region, then by gray
     reg, w = region[order], area[order]
     cum = np.cumsum(w)
     start = np.searchsorted(reg, reg, side="left")
-    before = np.where(start > 0, cum[start - 1], 0.0)
-    total = np.bincount(reg, w)[reg]
-    # first triangle of each region whose cumulative weight reaches half the region's
-    half = (cum - before) >= 0.5 * total
-    first = np.zeros(len(reg), bool)
-    first[half] = True
-    first[1:] &= ~(half[:-1] & (reg[1:] == reg[:-1]))
-    median = np.empty(region.max() + 1)
-    median[reg[first]] = gray[order][first]
-    return median[region]
+    within = cum - np.where(start > 0, cum[start - 1], 0.0)  # cumulative area in the region
+    # the first triangle of each region whose cumulative area reaches half the region's
+    reached = np.flatnonzero(within >= 0.5 * np.bincount(reg, w)[reg])
+    _, first = np.unique(reg[reached], return_index=True)
+    return gray[order][reached[first]][region]
 
 
 def level_image(points, triangles, level, shape):

@@ -3,6 +3,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
+from scipy.spatial import cKDTree
 
 from ._validate import check_number
 from .errors import InputError, ParameterError
@@ -312,8 +313,6 @@ def _drop_coincident(sites, labels, constraint, rows, cols, u, l, tol_px=1e-6):
     the two out of the triangulation. The free site adds nothing there. Removing it does
     not change the energy (its pixels are as near the other site).
     """
-    from scipy.spatial import cKDTree
-
     pairs = cKDTree(sites).query_pairs(tol_px, output_type="ndarray")
     if len(pairs) == 0:
         return sites, labels
