@@ -1,32 +1,26 @@
 """ctseg: segmented triangle meshes from X-ray CT images (Yang et al. 2014, and beyond).
 
-Each stage is a plain function on numpy arrays; :func:`segment_image` runs them all.
+Each stage is a plain function on numpy arrays; :func:`segment_image` runs them all, with
+the parameters of :mod:`ctseg.params`. The VTK layer is :mod:`ctseg.filters`.
 """
-import os as _os
-
-# Run from a source checkout (PYTHONPATH=., python -m pytest), the VTK layer lives in the
-# sibling folder filters/ that the installed package maps to ctseg.filters: map it here too.
-_root = _os.path.dirname(_os.path.dirname(_os.path.abspath(__file__)))
-if (_os.path.isfile(_os.path.join(_root, "pyproject.toml"))
-        and _os.path.isfile(_os.path.join(_root, "filters", "segment.py"))
-        and not _os.path.isdir(_os.path.join(_os.path.dirname(__file__), "filters"))):
-    __path__.append(_root)  # noqa: F821 - the package's own search path
-
 from .density import density_map
 from .errors import CTSegError, InputError, MeshCheckError, ParameterError, ResumeError
+from .params import AUTO, SegmentParams
 from .sites import initial_sites, random_sites, density_random_sites, ward_sites
 from .cvt import lloyd_cvt, CVTResult
 from .triangulation import delaunay_mesh, TriangleMesh
 from .triangle_gray import triangle_gray
 from .graphcut import graphcut_split
-from .materials import segment_triangles
+from .recursive_cut import segment_triangles
+from .labelling import label_mesh
 from .pipeline import SegmentedMesh, default_n_sites, segment_image
+from .volume import segment_array, segment_volume
 
 __version__ = "0.1.0"
 __all__ = [
     "density_map", "initial_sites", "random_sites", "density_random_sites", "ward_sites",
     "lloyd_cvt", "CVTResult", "delaunay_mesh", "TriangleMesh", "triangle_gray",
-    "graphcut_split", "segment_triangles", "segment_image", "SegmentedMesh",
-    "default_n_sites", "CTSegError", "InputError", "ParameterError", "MeshCheckError",
-    "ResumeError",
+    "graphcut_split", "segment_triangles", "label_mesh", "segment_image", "SegmentedMesh",
+    "segment_volume", "segment_array", "default_n_sites", "SegmentParams", "AUTO", "CTSegError",
+    "InputError", "ParameterError", "MeshCheckError", "ResumeError",
 ]

@@ -20,6 +20,9 @@ from scipy import ndimage
 
 from ._validate import as_image, check_number
 from .errors import ParameterError
+from .intensity import rescale_gray
+from .levels import flat_pixels, pixel_material_levels
+from .params import DEFAULTS, check, resolve
 from .projection import filtered_backprojection, forward_project
 
 # The basis is computed on an image no larger than this (block-averaged metal fraction,
@@ -27,12 +30,6 @@ from .projection import filtered_backprojection, forward_project
 # On the simulated 512 px slices a 256 px basis corrected as well as a full-size one
 # (polymer Dice 0.975-0.992 against 0.975-0.989 on seeds 0-8) in 0.15 s instead of 0.45 s.
 BASIS_MAX_PX = 256
-
-MIN_EXPLAINED = 0.05
-"""A correction that removes less than this share of the within-material variance is
-fitting noise, not streaks, and is not applied (simulated steel slices: 0.11 at 96 px,
-0.39-0.75 at 512 px; a 48 px volume slice with a little steel: 0.001)."""
-
 
 def metal_streak_basis(metal, n_angles=None):
     """The shape of the beam-hardening artifact of a metal mask: FBP of squared path lengths.
@@ -141,8 +138,11 @@ class StreakCorrection:
                 "skipped": self.reason}
 
 
-def correct_metal_streaks(image, levels, *, flat=None, sigma=1.0, margin_px=3, rounds=3,
-                          n_angles=None):
+def correct_metal_streaks(image, levels, *, flat=None,
+                          streak_sigma_px=DEFAULTS.streak_sigma_px,
+                          streak_margin_px=DEFAULTS.streak_margin_px,
+                          streak_rounds=DEFAULTS.streak_rounds,
+                          streak_min_explained=DEFAULTS.streak_min_explained, n_angles=None):
     """Remove beam-hardening streaks of the densest material from a CT slice.
 
     Parameters
@@ -154,13 +154,15 @@ def correct_metal_streaks(image, levels, *, flat=None, sigma=1.0, margin_px=3, r
         metal. With fewer than two levels nothing is done.
     flat : (rows, cols) bool array_like, optional
         Pixels away from edges that measure the materials (default all).
-    sigma : float
+    streak_sigma_px : float
         Gaussian smoothing (px) before each pixel is given its nearest level.
-    margin_px : int
+    streak_margin_px : int
         Pixels within this distance of the metal are left out of the fit (partial volume,
         blooming).
-    rounds : int
+    streak_rounds : int
         Fit, re-classify, fit again: streak pixels first read as the wrong material.
+    streak_min_explained : float
+        Share of the within-material variance the correction must remove to be applied.
     n_angles : int, optional
         See :func:`metal_streak_basis`.
 
@@ -179,7 +181,7 @@ def correct_metal_streaks(image, levels, *, flat=None, sigma=1.0, margin_px=3, r
     -----
     The weight is kept only when positive (beam hardening makes rays through metal read
     too *little* attenuation, never too much) and when the correction removes at least
-    :data:`MIN_EXPLAINED` of the within-material variance. The streak basis assumes parallel-beam
+    ``streak_min_explained`` of the within-material variance (less is fitting noise). The streak basis assumes parallel-beam
     geometry over the whole image; a crop that cuts off metal, or fan/cone-beam data,
     fit less well and get a smaller weight.
     """
@@ -187,9 +189,10 @@ def correct_metal_streaks(image, levels, *, flat=None, sigma=1.0, margin_px=3, r
     lv = np.sort(np.asarray(levels, float).ravel())
     if lv.size and not np.all(np.isfinite(lv)):
         raise ParameterError(f"levels: need finite gray levels, got {levels!r}")
-    sigma = check_number(sigma, "sigma", low=0)
-    margin_px = check_number(margin_px, "margin_px", low=0, integer=True)
-    rounds = check_number(rounds, "rounds", low=1, integer=True)
+    sigma = check("streak_sigma_px", streak_sigma_px)
+    margin_px = check("streak_margin_px", streak_margin_px)
+    rounds = check("streak_rounds", streak_rounds)
+    min_explained = check("streak_min_explained", streak_min_explained)
     if flat is None:
         flat = np.ones(img.shape, bool)
     flat = np.asarray(flat, bool)
@@ -218,10 +221,58 @@ def correct_metal_streaks(image, levels, *, flat=None, sigma=1.0, margin_px=3, r
             return StreakCorrection(img, metal_pixels=n_metal,
                                     reason="fitted weight not positive")
         classes = classify(img + weight * basis)
-    if explained < MIN_EXPLAINED:
+    if explained < min_explained:
         return StreakCorrection(img, metal_pixels=n_metal, explained=float(explained),
                                 reason=f"explains only {explained:.1%} of the variance")
     change = weight * basis
     max_change = float(np.abs(change[~metal]).max())
     return StreakCorrection(img + change, weight=float(weight), explained=float(explained),
                             metal_pixels=n_metal, max_change=max_change)
+
+
+def correct_streaks(image, params=None, *, gray_scale=None, levels_255=None, **overrides):
+    """The metal streak correction as :func:`ctseg.segment_image` runs it.
+
+    :func:`correct_metal_streaks` with the material levels of the image itself
+    (:func:`ctseg.levels.pixel_material_levels` of its flat pixels) or the given ones,
+    fitted on the flat pixels.
+
+    Parameters
+    ----------
+    image : (rows, cols) array_like
+    params : ctseg.params.SegmentParams or dict, optional
+        The levels' and the correction's parameters; ``overrides`` by name.
+    gray_scale : (offset, factor), optional
+        The map onto 0-255 (a volume's); default the image's own.
+    levels_255 : (K,) array_like, optional
+        Material levels on the 0-255 scale (a volume's); used with ``gray_scale``.
+
+    Returns
+    -------
+    StreakCorrection
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> fix = correct_streaks(np.zeros((16, 16)))
+    >>> fix.weight, fix.reason
+    (0.0, 'fewer than two materials')
+    """
+    p = resolve(params, **overrides)
+    img = as_image(image)
+    flat = flat_pixels(img, p.flat_sigma_px, p.density_floor, p.density_saturation)
+    if levels_255 is not None and gray_scale is not None:
+        levels255, (offset, factor) = np.asarray(levels_255, float), gray_scale
+    else:
+        # the levels as material_levels finds them, with the flat pixels computed once
+        g255, (offset, factor) = rescale_gray(img, p.rescale_low_pct, p.rescale_high_pct,
+                                              scale=gray_scale)
+        levels255 = pixel_material_levels(
+            g255, flat, merge_k=p.merge_k, merge_rel=p.merge_rel,
+            merge_floor_255=p.merge_floor_255, merge_threshold_255=p.merge_threshold_255,
+            level_min_fraction=p.level_min_fraction, n_materials=p.n_materials)[0]
+    levels = levels255 / factor + offset if factor else np.array([offset])
+    return correct_metal_streaks(img, levels, flat=flat, streak_sigma_px=p.streak_sigma_px,
+                                 streak_margin_px=p.streak_margin_px,
+                                 streak_rounds=p.streak_rounds,
+                                 streak_min_explained=p.streak_min_explained)

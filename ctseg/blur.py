@@ -19,19 +19,9 @@ from scipy.sparse.csgraph import connected_components
 
 from ._validate import as_image, check_number
 from .errors import ParameterError
+from .params import DEFAULTS, check
 from .triangle_gray import pixel_mean_of_triangles, triangle_gray
 from .triangulation import triangle_areas
-
-MAX_BLUR_PX = 3.0
-"""Largest point-spread standard deviation :func:`estimate_blur` considers (px)."""
-
-MIN_SELF_WEIGHT = 0.8
-"""Floor of the self weight in :func:`blur_corrected_gray`: a triangle's deviation from its
-predicted gray is amplified at most 1 / 0.8 = 1.25 times. Thin triangles' grays are noisy
-and their predicted blur least certain. On 39 simulated 512 px slices (seeds 0-14, 20-23,
-40-59) the smallest per-material Dice was 0.963, 0.966, 0.971, 0.970 and 0.960 with floors
-0.3, 0.6, 0.7, 0.8 and 1 (no amplification); 0.7 and 0.8 are alike, 0.8 amplifies less."""
-
 
 def region_levels(material, gray, area, adjacency):
     """Gray of each triangle's region: the area-weighted median gray of the connected
@@ -104,13 +94,13 @@ def level_image(points, triangles, level, shape):
     return out
 
 
-def estimate_blur(image, levels_image, band_px=3, max_px=MAX_BLUR_PX):
+def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_px):
     """Standard deviation (px) of the Gaussian that best turns a level image into the image.
 
     Minimises the mean squared difference between ``image`` and
     ``gaussian_filter(levels_image, s)`` over the pixels within ``band_px`` of a level
     change (elsewhere blur changes nothing and only noise is compared): a 0.5 px grid on
-    [0, ``max_px``], then two parabola fits around its best point (to within about
+    [0, ``blur_max_px``], then two parabola fits around its best point (to within about
     0.02 px of a fine search on the simulated slices).
 
     Parameters
@@ -121,27 +111,27 @@ def estimate_blur(image, levels_image, band_px=3, max_px=MAX_BLUR_PX):
         What the slice would be without blur (:func:`level_image` of a labelling).
     band_px : int
         Half width of the band around level changes.
-    max_px : float
+    blur_max_px : float
         Upper end of the search.
 
     Returns
     -------
     sigma : float
-        In [0, max_px]; 0 when the level image has no edge.
+        In [0, blur_max_px]; 0 when the level image has no edge.
 
     Raises
     ------
     InputError
         If either image is not a finite 2D array.
     ParameterError
-        If the shapes differ or ``band_px``, ``max_px`` are out of range.
+        If the shapes differ or ``band_px``, ``blur_max_px`` are out of range.
     """
     img = as_image(image)
     lev = as_image(levels_image, "levels_image")
     if lev.shape != img.shape:
         raise ParameterError(f"levels_image: shape {lev.shape} differs from the image's {img.shape}")
     band_px = check_number(band_px, "band_px", low=1, integer=True)
-    max_px = check_number(max_px, "max_px", low=0.0, low_open=True)
+    max_px = check("blur_max_px", blur_max_px)
     change = (ndimage.maximum_filter(lev, 3, mode="nearest")
               - ndimage.minimum_filter(lev, 3, mode="nearest")) > 0
     if not change.any():
@@ -199,12 +189,13 @@ def self_weight(points, triangles, sigma):
 
 
 def blur_corrected_gray(gray, points, triangles, level, image, sigma=None,
-                        min_self_weight=MIN_SELF_WEIGHT):
+                        blur_min_self_weight=DEFAULTS.blur_min_self_weight,
+                        blur_max_px=DEFAULTS.blur_max_px):
     """Triangle grays with the blur a labelling predicts taken off.
 
     ``level + (gray - mean_t(G_sigma * L)) / w``, where ``L = level_image(level)``,
     ``mean_t`` is the exact area-weighted mean over triangle t (as ``gray`` was measured)
-    and ``w = max(self_weight, min_self_weight)``. If the image is exactly ``G_sigma * L``,
+    and ``w = max(self_weight, blur_min_self_weight)``. If the image is exactly ``G_sigma * L``,
     every triangle gets back its level.
 
     Parameters
@@ -219,8 +210,12 @@ def blur_corrected_gray(gray, points, triangles, level, image, sigma=None,
         The slice the grays were measured on (for ``sigma``).
     sigma : float, optional
         Point-spread standard deviation (px); default :func:`estimate_blur`.
-    min_self_weight : float
-        Floor of the self weight, in (0, 1] (1: no amplification).
+    blur_min_self_weight : float
+        Floor of the self weight, in (0, 1] (1: no amplification): thin triangles' grays
+        are noisy and their predicted blur least certain, so their deviation is amplified
+        at most ``1 / blur_min_self_weight`` times.
+    blur_max_px : float
+        Largest point-spread sd :func:`estimate_blur` considers.
 
     Returns
     -------
@@ -229,15 +224,14 @@ def blur_corrected_gray(gray, points, triangles, level, image, sigma=None,
         The standard deviation used.
     """
     img = as_image(image)
-    min_self_weight = check_number(min_self_weight, "min_self_weight", low=0.0, high=1.0,
-                                   low_open=True)
+    min_self_weight = check("blur_min_self_weight", blur_min_self_weight)
     gray = np.asarray(gray, float)
     if gray.shape != (len(triangles),):
         raise ParameterError(f"gray: expected one value per triangle ({len(triangles)}), "
                              f"got shape {gray.shape}")
     lev = level_image(points, triangles, level, img.shape)
     if sigma is None:
-        sigma = estimate_blur(img, lev)
+        sigma = estimate_blur(img, lev, blur_max_px=blur_max_px)
     sigma = check_number(sigma, "sigma", low=0.0)
     blurred = ndimage.gaussian_filter(lev, sigma, mode="nearest") if sigma > 0 else lev
     predicted = triangle_gray(blurred, points, triangles)

@@ -8,10 +8,10 @@ import time
 
 import numpy as np
 
-from .errors import CTSegError, InputError, ResumeError
-from .pipeline import PIXELS_PER_SITE
+from .errors import CTSegError, InputError, ParameterError, ResumeError
+from .params import SPECS, SegmentParams, resolve_name
 
-MESH_HELP = f"""\
+MESH_HELP = """\
 Segment a CT slice or volume into a triangle mesh with one material per triangle.
 
 Pipeline (Yang et al. 2014): gradient density map -> Ward-initialised centroidal Voronoi
@@ -32,8 +32,10 @@ each a coloured PLY NAME_material<k>.ply). Every mesh passes pymeshlab's checks 
 and every file is written under a temporary name and renamed: an error or Ctrl-C leaves
 no partial file.
 
-Defaults: one per {PIXELS_PER_SITE} pixels of a slice for the sites (2048 for 512 x 512); the split
-and merge thresholds are derived from the noise measured on the image.
+Parameters: the common ones have options of their own (below); every other one is set
+with --set NAME=VALUE (repeatable; 'auto' for the automatic value where allowed), or all
+at once from a JSON file (--params, as in a report's "parameters"). `ctseg params` lists
+them all with their defaults, ranges and units.
 """
 
 
@@ -69,36 +71,34 @@ def _mesh(args):
     from ctseg.filters import read_image, segmentation_to_polydata, write_mesh, write_polydata
     from ctseg.filters.figure import render_figure
 
+    from .geometry import slice_axis, volume_slice
     from .metrics import evaluate, evaluate_volume
-    from .pipeline import segment_image
-    from .volume import segment_volume, slice_axis, volume_slice
+    from .volume import segment_array
 
     _check_outputs(args)
     image, geom = read_image(args.input, series=args.series)
     image = _checked_input(np.asarray(image), args.input)
     show = sys.stderr.isatty() and not args.quiet
     progress = _progress_printer(show)
-    common = dict(n_sites=args.sites, seed=args.seed, n_materials=args.materials,
-                  streak_correction=not args.no_streak_correction,
-                  blur_correction=not args.no_blur_correction)
+    params = args.params_obj
     if image.ndim == 2:
         if args.resume:
             print("ctseg: note: --resume applies to volumes, whose slices are saved as they "
                   "finish; a single slice is one step and starts afresh", file=sys.stderr)
-        result = segment_image(image, progress=progress, **common)
+        result = segment_array(image, params, progress=progress)
         fig_image, fig_seg, fig_name = image, result, os.path.basename(args.input)
         diag = dict(result.diagnostics)
     else:
-        ax = slice_axis(args.axis)
+        ax = slice_axis(params.axis)
         mid = image.shape[ax] // 2
         args.checkpoint = checkpoint_folder(args.output)
         if not args.resume and os.path.isdir(args.checkpoint):
             shutil.rmtree(args.checkpoint)
-        result = segment_volume(image, axis=ax, n_jobs=args.jobs, client=args.dask,
-                                progress=progress, keep_maps=(mid,) if args.figure else (),
-                                checkpoint=args.checkpoint, **common)
+        result = segment_array(image, params, client=args.dask, progress=progress,
+                               keep_maps=(mid,) if args.figure else (),
+                               checkpoint=args.checkpoint)
         fig_image, fig_seg = volume_slice(image, ax, mid), result.slices[mid]
-        fig_name = f"{os.path.basename(args.input.rstrip(os.sep))} slice {mid} ({args.axis})"
+        fig_name = f"{os.path.basename(args.input.rstrip(os.sep))} slice {mid} ({params.axis})"
         diag = dict(result.diagnostics)
         diag["slices"] = [{"n_triangles": s.diagnostics["n_triangles"],
                            "lloyd_iterations": s.diagnostics["lloyd_iterations"],
@@ -191,6 +191,76 @@ def _summary(args, image, diag, written):
               f"{acc['boundary_px']['mean']:.3f} px")
 
 
+def _option_help(spec):
+    default = spec.default if spec.kind != "bool" else ("on" if spec.default else "off")
+    unit = f", {spec.unit}" if spec.unit else ""
+    return f"{spec.doc} (parameter {spec.name}; default {default}{unit}; {spec.range_text()})"
+
+
+def _add_parameter_options(m):
+    """The common parameters' own options and --set/--params for all, from the spec."""
+    for spec in SPECS.values():
+        if not spec.cli:
+            continue
+        if spec.kind == "bool":
+            # only switches that turn a default-on step off
+            m.add_argument(spec.cli, dest=spec.name, action="store_const", const=False,
+                           default=None, help=_option_help(spec))
+        else:
+            m.add_argument(spec.cli, dest=spec.name, default=None, metavar=spec.name.upper()
+                           if spec.kind != "choice" else None,
+                           choices=spec.choices or None, help=_option_help(spec))
+    m.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="set any parameter by name (repeatable; `ctseg params` lists them)")
+    m.add_argument("--params", metavar="JSON",
+                   help="start from the parameters in this JSON file (the report's "
+                        "\"parameters\", or a flat {name: value})")
+
+
+def params_from_args(args):
+    """The SegmentParams a ``ctseg mesh`` command line asks for: --params first, then
+    --set, then the named options; each value checked by the spec."""
+    base = SegmentParams()
+    if args.params:
+        try:
+            with open(args.params) as fh:
+                data = json.load(fh)
+        except (OSError, ValueError) as exc:
+            raise ParameterError(f"--params {args.params}: cannot read it as JSON ({exc})") from None
+        base = SegmentParams.from_dict(data.get("parameters", data) if isinstance(data, dict) else data)
+    changes = {}
+    for item in args.set:
+        name, sep, text = item.partition("=")
+        if not sep:
+            raise ParameterError(f"--set {item!r}: expected NAME=VALUE")
+        for key in resolve_name(name.strip()):
+            changes[key] = SPECS[key].parse(text)
+    for spec in SPECS.values():
+        value = getattr(args, spec.name, None) if spec.cli else None
+        if value is not None:
+            changes[spec.name] = value if spec.kind == "bool" else spec.parse(value)
+    return base.replace(**changes)
+
+
+def _print_params(args):
+    defaults = SegmentParams()
+    if args.json:
+        print(json.dumps(defaults.to_dict(), indent=2))
+        return 0
+    rows = [("name", "default", "valid", "unit", "option", "meaning")]
+    for spec in SPECS.values():
+        rows.append((spec.name, str(spec.default), spec.range_text(), spec.unit,
+                     spec.cli or f"--set {spec.name}=", spec.doc))
+    widths = [max(len(r[k]) for r in rows) for k in range(5)]
+    group = None
+    for k, row in enumerate(rows):
+        if k and SPECS[row[0]].group != group:
+            group = SPECS[row[0]].group
+            print(f"\n[{group}]")
+        print("  ".join(cell.ljust(w) for cell, w in zip(row[:5], widths)) + "  " + row[5])
+    return 0
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="ctseg", description="Segmented triangle meshes from CT images.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
@@ -201,16 +271,7 @@ def build_parser():
     m.add_argument("-o", "--output", required=True,
                    help="output mesh: .vtp, .vtu, .ply, .stl, .obj or .mlp")
     m.add_argument("--boundary", help="also write the material boundary polylines (.vtp)")
-    m.add_argument("--sites", type=int, default=None,
-                   help=f"CVT sites per slice (default: pixels / {PIXELS_PER_SITE})")
-    m.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    m.add_argument("--materials", type=int, default=None, metavar="K",
-                   help="exact number of materials (default: found from the data)")
-    m.add_argument("--axis", default="z", choices=["z", "y", "x"],
-                   help="slice axis of a volume (default z)")
-    m.add_argument("--jobs", type=int, default=0, metavar="N",
-                   help="worker processes for a volume's slices (default 0: one per core; "
-                        "1: this process)")
+    _add_parameter_options(m)
     m.add_argument("--dask", metavar="ADDRESS",
                    help="run a volume's slices on this Dask scheduler (e.g. tcp://host:8786)")
     m.add_argument("--resume", action="store_true",
@@ -218,17 +279,12 @@ def build_parser():
                         "it finished (kept in OUTPUT.ctseg-partial) are not computed again")
     m.add_argument("--series", metavar="UID",
                    help="DICOM SeriesInstanceUID, for a folder holding several series")
-    m.add_argument("--no-streak-correction", action="store_true",
-                   help="segment the image as it is: skip the removal of the dark beam-hardening "
-                        "streaks next to metal (on by default; its fitted weight is in the report)")
-    m.add_argument("--no-blur-correction", action="store_true",
-                   help="label the triangles once: skip taking off the edge blur the first "
-                        "labelling predicts before labelling again (on by default; the fitted "
-                        "blur, px, is the report's blur_px)")
-    m.add_argument("--report", help="write all diagnostics as JSON")
+    m.add_argument("--report", help="write all diagnostics as JSON (with every parameter used)")
     m.add_argument("--figure", help="write the six-panel figure (PNG; a volume's middle slice)")
     m.add_argument("--truth", help="ground-truth labels (same shape) to report Dice against")
     m.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    p = sub.add_parser("params", help="list every parameter: default, valid range, unit, meaning")
+    p.add_argument("--json", action="store_true", help="print the defaults as JSON instead")
     return parser
 
 
@@ -236,7 +292,10 @@ def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        if args.command == "params":
+            return _print_params(args)
         if args.command == "mesh":
+            args.params_obj = params_from_args(args)
             return _mesh(args)
     except CTSegError as exc:
         if args.debug:

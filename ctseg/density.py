@@ -2,24 +2,30 @@
 import numpy as np
 from scipy import ndimage
 
-from ._validate import as_image, check_number
+from ._validate import as_image
+from .params import AUTO, DEFAULTS, check
 
 
-def density_map(image, sigma=1.0, floor=0.02, saturation="auto", ridge=0.0):
+def density_map(image, density_sigma_px=DEFAULTS.density_sigma_px,
+                density_floor=DEFAULTS.density_floor,
+                density_saturation=DEFAULTS.density_saturation,
+                density_ridge=DEFAULTS.density_ridge):
     """Per-pixel density rho from the smoothed gradient magnitude.
 
-    ``rho = floor + min(1, g / g_ref)`` with ``g = |grad(G_sigma * I)|``. Large rho near
+    ``rho = floor + min(1, g / g_ref)`` with ``g = |grad(G_sigma * I)|``, sigma =
+    ``density_sigma_px`` and floor = ``density_floor``. Large rho near
     material boundaries draws CVT sites there, so small triangles hug the boundaries; the
     floor keeps sites in flat regions. rho is uniform on each pixel (paper eq. 4).
 
-    With ``saturation=None``, ``g_ref = max g`` (the paper's and SPEC 1's normalisation).
+    With ``density_saturation=1``, ``g_ref = max g`` (the paper's and SPEC 1's
+    normalisation; with ``density_ridge=0`` this is the paper's map).
     On industrial scans this starves weak boundaries: a steel edge has ten to twenty times
     the gradient of a polymer/air or aluminium/air edge, so those edges get a density barely
     above the floor and few sites. The default ``'auto'`` saturates instead at
     ``g_ref = max(10 * median(g), 0.02 * max(g))``: the median gradient measures the noise
     (most pixels are inside a material), so every edge well above the noise gets the full
     density whatever its contrast. A number sets ``g_ref`` as a fraction of ``max(g)``.
-    ``ridge > 0`` multiplies by ``(g / local max of g)**ridge`` over a (2 sigma + 1)-pixel
+    ``density_ridge > 0`` multiplies by ``(g / local max of g)**ridge`` over a (2 sigma + 1)-pixel
     window: each edge's density becomes a narrow ridge on the edge line, whatever its
     contrast, so the CVT puts one row of sites on the boundary instead of a band of
     sites across it (a band makes zig-zag triangles straddling the boundary).
@@ -32,13 +38,13 @@ def density_map(image, sigma=1.0, floor=0.02, saturation="auto", ridge=0.0):
     ----------
     image : (rows, cols) array_like
         Gray image (any units: the result is normalised).
-    sigma : float, optional
+    density_sigma_px : float, optional
         Standard deviation of the Gaussian pre-smoothing, in pixels (0 disables it).
-    floor : float, optional
+    density_floor : float, optional
         Density added everywhere, > 0.
-    saturation : {'auto', None} or float, optional
+    density_saturation : 'auto' or float in (0, 1], optional
         How the gradient is normalised (see above).
-    ridge : float, optional
+    density_ridge : float, optional
         Exponent of the ridge sharpening (0 = off, the paper's map).
 
     Returns
@@ -51,17 +57,25 @@ def density_map(image, sigma=1.0, floor=0.02, saturation="auto", ridge=0.0):
     InputError
         If the image is not a finite 2D numeric array of at least 2 x 2 pixels.
     ParameterError
-        If ``sigma < 0``, ``floor <= 0`` or ``saturation`` is not 'auto', None or in (0, 1].
+        A parameter outside its range in :mod:`ctseg.params`.
 
     References
     ----------
     Yang et al. 2014, section 5.1 and eq. (4).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> img = np.zeros((32, 32)); img[:, 16:] = 100.0
+    >>> rho = density_map(img)
+    >>> bool(rho[:, 15:17].mean() > rho[:, :8].mean())
+    True
     """
     img = as_image(image)
-    sigma = check_number(sigma, "sigma", low=0.0)
-    floor = check_number(floor, "floor", low=0.0, low_open=True)
-    if saturation is not None and saturation != "auto":
-        saturation = check_number(saturation, "saturation", low=0.0, high=1.0, low_open=True)
+    sigma = check("density_sigma_px", density_sigma_px)
+    floor = check("density_floor", density_floor)
+    saturation = check("density_saturation", density_saturation)
+    ridge = check("density_ridge", density_ridge)
     # Normalise first so that huge value ranges (1e30) cannot overflow the gradient.
     span = float(img.max() - img.min())
     if span == 0.0:
@@ -73,9 +87,7 @@ def density_map(image, sigma=1.0, floor=0.02, saturation="auto", ridge=0.0):
     peak = mag.max()
     if peak == 0.0:
         return np.full(img.shape, floor)
-    if saturation is None:
-        return floor + mag / peak
-    if saturation == "auto":
+    if saturation == AUTO:
         g_noise = 2.0 * float(np.median(mag))
         g_ref = max(10.0 * g_noise, 0.02 * peak)
     else:

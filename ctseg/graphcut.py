@@ -4,8 +4,8 @@ from dataclasses import dataclass
 import maxflow
 import numpy as np
 
-from ._validate import check_number
 from .errors import InputError, ParameterError
+from .params import AUTO, DEFAULTS, check
 
 
 @dataclass
@@ -26,17 +26,9 @@ class GraphCapacities:
     seeds: tuple
 
 
-def cut_energy(caps, labels):
-    """Energy of a labelling (0/1 per node) under ``caps``: the value of its s-t cut."""
-    labels = np.asarray(labels).astype(bool)
-    e = np.where(labels, caps.source_cap, caps.sink_cap).sum()
-    if len(caps.edges):
-        e += caps.edge_cap[labels[caps.edges[:, 0]] != labels[caps.edges[:, 1]]].sum()
-    return float(e)
-
-
-def graphcut_capacities(gray, edges, centroids, seeds=None, theta=None, lam=70.0, beta=0.286,
-                        eps=1.0, edge_length=None):
+def graphcut_capacities(gray, edges, centroids, seeds=None, theta_255=DEFAULTS.theta_255,
+                        lam=DEFAULTS.lam, beta=DEFAULTS.beta, eps_255=DEFAULTS.eps_255,
+                        edge_length=None):
     """Build the t-link and n-link capacities of the paper's eqs. (6)-(9).
 
     Parameters
@@ -49,11 +41,11 @@ def graphcut_capacities(gray, edges, centroids, seeds=None, theta=None, lam=70.0
         Triangle barycentres (for d(tm, tn)).
     seeds : (int, int), optional
         (s0, s1) triangles; default the lowest and highest f.
-    theta : float, optional
-        Seed-set radius on the 0-255 scale; default 10% of f(s1) - f(s0).
+    theta_255 : float or 'auto', optional
+        Seed-set radius on the 0-255 scale; 'auto' = 10% of f(s1) - f(s0).
     lam, beta : float
-        The paper's lambda and beta (70 and 0.286).
-    eps : float
+        The paper's lambda and beta (defaults in :mod:`ctseg.params`: the paper's values).
+    eps_255 : float
         Added to |f(tm) - f(tn)| so that equal neighbours get a finite n-link.
     edge_length : (k,) array_like, optional
         If given, n-links are multiplied by the shared edge length (an option, not the paper's).
@@ -65,14 +57,19 @@ def graphcut_capacities(gray, edges, centroids, seeds=None, theta=None, lam=70.0
     References
     ----------
     Yang et al. 2014, section 6.1, eqs. (6)-(9); eq. (8) read with "1 -" for both labels.
+
+    Example
+    -------
+    >>> caps = graphcut_capacities([0.0, 10.0, 250.0], [[0, 1], [1, 2]], [[0, 0], [1, 0], [2, 0]])
+    >>> caps.seeds
+    (0, 2)
     """
     f = np.asarray(gray, dtype=np.float64)
     m = len(f)
     if m < 2:
         raise InputError(f"graph cut: need at least 2 triangles, got {m}")
-    lam = check_number(lam, "lam", low=0.0)
-    beta = check_number(beta, "beta", low=0.0)
-    eps = check_number(eps, "eps", low=0.0, low_open=True)
+    lam, beta, eps = check("lam", lam), check("beta", beta), check("eps_255", eps_255)
+    theta = check("theta_255", theta_255)
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     if seeds is None:
         s0, s1 = int(np.argmin(f)), int(np.argmax(f))
@@ -81,9 +78,8 @@ def graphcut_capacities(gray, edges, centroids, seeds=None, theta=None, lam=70.0
         if not (0 <= s0 < m and 0 <= s1 < m) or s0 == s1:
             raise ParameterError(f"seeds: need two distinct triangle indices in 0..{m - 1}, got {seeds}")
     f0, f1 = f[s0], f[s1]
-    if theta is None:
+    if theta == AUTO:
         theta = 0.1 * abs(f1 - f0)
-    theta = check_number(theta, "theta", low=0.0)
     d0, d1 = np.abs(f - f0), np.abs(f - f1)
     in0 = d0 <= theta
     in1 = (d1 <= theta) & ~in0
@@ -125,11 +121,18 @@ def graphcut_split(gray, edges, centroids, **params):
     labels : (m,) int8 ndarray
         0 for the source side (with s0, the darker seed), 1 for the sink side.
     flow : float
-        The max-flow value, equal to the minimum of :func:`cut_energy`.
+        The max-flow value, equal to the smallest s-t cut value of any labelling.
 
     References
     ----------
     Boykov and Kolmogorov 2004 (PyMaxflow); Yang et al. 2014, section 6.1.
+
+    Example
+    -------
+    >>> labels, flow = graphcut_split([0.0, 10.0, 240.0, 250.0], [[0, 1], [1, 2], [2, 3]],
+    ...                               [[0, 0], [1, 0], [2, 0], [3, 0]])
+    >>> labels.tolist()
+    [0, 0, 1, 1]
     """
     caps = graphcut_capacities(gray, edges, centroids, **params)
     m = len(caps.source_cap)

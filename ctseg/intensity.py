@@ -2,22 +2,24 @@
 import numpy as np
 
 from ._validate import as_image
+from .params import DEFAULTS
 
 GRAY_MAX = 255.0
 
 
-def gray_scale(values, low_pct=0.5, high_pct=99.5):
+def gray_scale(values, rescale_low_pct=DEFAULTS.rescale_low_pct,
+               rescale_high_pct=DEFAULTS.rescale_high_pct):
     """The robust map of gray values onto [0, 255]: ``(offset, factor)``.
 
-    ``offset`` is the ``low_pct`` percentile and ``255 / factor`` the span up to the
-    ``high_pct`` percentile (the true extremes where those collapse). Works on any array,
+    ``offset`` is the ``rescale_low_pct`` percentile and ``255 / factor`` the span up to
+    the ``rescale_high_pct`` percentile (the true extremes where those collapse). Works on any array,
     so one map can serve every slice of a volume.
 
     Parameters
     ----------
     values : array_like
         Finite gray values of any shape.
-    low_pct, high_pct : float
+    rescale_low_pct, rescale_high_pct : float
 
     Returns
     -------
@@ -25,7 +27,7 @@ def gray_scale(values, low_pct=0.5, high_pct=99.5):
         ``factor`` is 0 for constant values.
     """
     v = np.asarray(values, dtype=np.float64)
-    lo, hi = np.percentile(v, [low_pct, high_pct])
+    lo, hi = np.percentile(v, [rescale_low_pct, rescale_high_pct])
     if hi <= lo:  # percentiles collapse: fall back on the true extremes
         lo, hi = float(v.min()), float(v.max())
     if hi <= lo:
@@ -33,7 +35,8 @@ def gray_scale(values, low_pct=0.5, high_pct=99.5):
     return float(lo), float(GRAY_MAX / (hi - lo))
 
 
-def rescale_gray(image, low_pct=0.5, high_pct=99.5, scale=None):
+def rescale_gray(image, rescale_low_pct=DEFAULTS.rescale_low_pct,
+                 rescale_high_pct=DEFAULTS.rescale_high_pct, scale=None):
     """Map gray values robustly onto [0, 255].
 
     The paper's energy constants (lambda = 70, beta = 0.286, theta) assume 8-bit gray values.
@@ -44,7 +47,7 @@ def rescale_gray(image, low_pct=0.5, high_pct=99.5, scale=None):
     ----------
     image : (rows, cols) array_like
         Gray image in any numeric dtype.
-    low_pct, high_pct : float
+    rescale_low_pct, rescale_high_pct : float
         Percentiles mapped to 0 and 255; values beyond them are clipped, so a few hot
         pixels or metal streaks do not squash the materials into a narrow band.
     scale : (offset, factor), optional
@@ -65,7 +68,7 @@ def rescale_gray(image, low_pct=0.5, high_pct=99.5, scale=None):
         If the image is not a finite 2D numeric array.
     """
     img = as_image(image)
-    offset, factor = gray_scale(img, low_pct, high_pct) if scale is None else map(float, scale)
+    offset, factor = gray_scale(img, rescale_low_pct, rescale_high_pct) if scale is None else map(float, scale)
     if factor == 0.0:
         return np.zeros_like(img), (offset, 0.0)
     return np.clip((img - offset) * factor, 0.0, GRAY_MAX), (offset, factor)

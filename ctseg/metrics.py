@@ -2,41 +2,7 @@
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .triangle_gray import pixel_overlaps
-
-
-def label_image(points, triangles, material, shape):
-    """Rasterise per-triangle labels: each pixel takes the label covering most of its area."""
-    rows, cols = int(shape[0]), int(shape[1])
-    mat = np.asarray(material, np.int64)
-    k = int(mat.max()) + 1
-    t, p, a = pixel_overlaps(points, triangles, (rows, cols))
-    acc = np.bincount(p * k + mat[t], a, rows * cols * k).reshape(rows * cols, k)
-    return acc.argmax(axis=1).reshape(rows, cols)
-
-
-def subpixel_label_image(points, triangles, material, shape, supersample):
-    """Rasterise per-triangle labels on a grid ``supersample`` times finer than the image.
-
-    Fine pixel (i, j) is the square of side 1/supersample whose centre is at image pixel
-    coordinates ``((j + 0.5) / s - 0.5, (i + 0.5) / s - 0.5)``: the sub-pixels of the
-    phantoms' fine truth. The mesh spans the rectangle of the image's pixel centres, so the
-    outer half pixel is not covered.
-
-    Returns
-    -------
-    labels : (rows * s, cols * s) int64 ndarray
-    covered : (rows * s, cols * s) bool ndarray
-        Sub-pixels at least half inside the mesh (the others hold label 0).
-    """
-    s = int(supersample)
-    fine = (int(shape[0]) * s, int(shape[1]) * s)
-    pts = (np.asarray(points, float) + 0.5) * s - 0.5
-    mat = np.asarray(material, np.int64)
-    k = int(mat.max()) + 1
-    t, p, a = pixel_overlaps(pts, triangles, fine)
-    acc = np.bincount(p * k + mat[t], a, fine[0] * fine[1] * k).reshape(-1, k)
-    return acc.argmax(axis=1).reshape(fine), (acc.sum(axis=1) >= 0.5 - 1e-9).reshape(fine)
+from .raster import label_image, subpixel_label_image, volume_labels
 
 
 def dice_per_label(pred, truth, n_labels=None):
@@ -66,6 +32,20 @@ def truth_boundary_points(truth, supersample=1):
 
 
 def sample_segments(points, edges, step_px=0.25):
+    """Points along line segments, both ends included, at most ``step_px`` apart.
+
+    Parameters
+    ----------
+    points : (n, 2) ndarray
+    edges : (k, 2) int ndarray
+        Segments as pairs of indices into ``points``.
+    step_px : float
+        Largest spacing of the samples along a segment.
+
+    Returns
+    -------
+    samples : (s, 2) ndarray
+    """
     p0, p1 = points[edges[:, 0]], points[edges[:, 1]]
     n = np.maximum(2, np.ceil(np.hypot(*(p1 - p0).T) / step_px).astype(int) + 1)
     idx = np.repeat(np.arange(len(edges)), n)
@@ -124,15 +104,13 @@ def evaluate(seg, truth, supersample_truth=None, supersample=1):
 def evaluate_volume(vseg, truth):
     """Dice per material over a whole volume, and the boundary distance averaged over the
     slices that have a true boundary, of a :class:`ctseg.volume.VolumeSegmentation`."""
-    from .volume import volume_labels, volume_slice
-
     truth = np.asarray(truth, np.int64)
     pred = volume_labels(vseg, truth.shape)
     n = int(max(pred.max(), truth.max())) + 1
     dice = dice_per_label(pred, truth, n)
     dist = []
     for k, seg in enumerate(vseg.slices):
-        t = volume_slice(truth, vseg.axis, k)
+        t = np.take(truth, k, axis=vseg.axis)
         if len(np.unique(t)) > 1:
             dist.append(boundary_distance(seg.points, seg.boundary_edges, t))
     mean = {key: float(np.mean([d[key] for d in dist])) if dist else 0.0

@@ -7,50 +7,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._validate import as_image, check_number
-from .errors import CTSegError, InputError, ParameterError, ResumeError
+from ._validate import as_image
+from .errors import CTSegError, InputError, ParameterError
+from .geometry import slice_axis, volume_slice
 from .intensity import gray_scale
-from .pipeline import SEGMENT_DEFAULTS, SegmentedMesh, material_levels, segment_image
+from .labelling import LEVEL_KEYS
+from .levels import material_levels
+from .params import AUTO, resolve
+from .checkpoint import Checkpoint
+from .pipeline import segment_image
+from .raster import volume_labels  # noqa: F401  (transitional: callers move to ctseg.raster)
 from .resources import (LEVEL_BYTES_PER_VOXEL, RESULT_BYTES_PER_VOXEL, check_memory,
                         slice_bytes)
 
-AXES = {"z": 0, "y": 1, "x": 2}
-"""Slice axis name -> axis of the (nz, ny, nx) array (VTK's k, j, i)."""
-
 LEVEL_SAMPLE_VOXELS = 1 << 25
 """At most this many voxels (evenly spaced whole slices) measure the gray map and levels."""
-
-
-def slice_axis(axis):
-    """Numpy axis (0, 1, 2) of a slice axis given as 'z'/'y'/'x' or 0/1/2 (numpy order)."""
-    if isinstance(axis, str) and axis.lower() in AXES:
-        return AXES[axis.lower()]
-    if isinstance(axis, (int, np.integer)) and not isinstance(axis, bool) and 0 <= axis <= 2:
-        return int(axis)
-    raise ParameterError(f"axis: expected 'z', 'y' or 'x' (or 0, 1, 2), got {axis!r}")
-
-
-def volume_slice(volume, axis, k):
-    """Slice ``k`` along ``axis`` of an (nz, ny, nx) volume as a (rows, cols) image.
-
-    Along z the slice is ``volume[k]`` (rows = y, cols = x); along y it is
-    ``volume[:, k, :]`` (rows = z, cols = x); along x ``volume[:, :, k]`` (rows = z,
-    cols = y). :func:`slice_to_volume_index` maps its pixel coordinates back.
-    """
-    return np.take(volume, k, axis=slice_axis(axis))
-
-
-def slice_to_volume_index(points, axis, k):
-    """Points (x=col, y=row) of slice ``k`` -> (i, j, k) index coordinates of the volume
-    (VTK's order: i along x, j along y, k along z)."""
-    pts = np.asarray(points, float).reshape(-1, 2)
-    col, row, pos = pts[:, 0], pts[:, 1], np.full(len(pts), float(k))
-    ax = slice_axis(axis)
-    if ax == 0:
-        return np.column_stack([col, row, pos])
-    if ax == 1:
-        return np.column_stack([col, pos, row])
-    return np.column_stack([pos, col, row])
 
 
 @dataclass
@@ -81,9 +52,9 @@ class VolumeSegmentation:
         return len(self.material_gray)
 
 
-def _segment_slice(image, params, keep_maps=False):
+def _segment_slice(image, params, extra, keep_maps=False):
     """Worker: one slice; the per-pixel maps (as large as the slice) dropped unless asked."""
-    seg = segment_image(image, **params)
+    seg = segment_image(image, params, **extra)
     if not keep_maps:
         seg.density = None
         seg.cvt_labels = None
@@ -170,8 +141,8 @@ def _run_dask(tasks, client, on_done):
         keys = list(tasks)
         # slices go to the workers as data, not inside the task graph
         images = client.scatter([tasks[k][0] for k in keys])
-        futures = client.map(_segment_slice, images, [tasks[k][1] for k in keys],
-                             [tasks[k][2] for k in keys], pure=False)
+        futures = client.map(_segment_slice, images, *([tasks[k][i] for k in keys]
+                                                        for i in (1, 2, 3)), pure=False)
         index = {f.key: k for k, f in zip(keys, futures)}
         try:
             for fut in as_completed(futures):
@@ -185,86 +156,6 @@ def _run_dask(tasks, client, on_done):
             client.close()
 
 
-class _Checkpoint:
-    """Finished slices of one volume run, saved one file each in a folder.
-
-    ``meta.json`` names what the slices were made from (the volume's shape, dtype and
-    SHA-1, the axis, every parameter); a run with anything different refuses the folder
-    rather than mixing slices of two runs. Each slice is written under a temporary name
-    and renamed, so an interrupt never leaves half a slice.
-    """
-
-    def __init__(self, folder, vol, axis, params):
-        import hashlib
-
-        self.folder = os.fspath(folder)
-        self.meta = {"shape": list(vol.shape), "dtype": str(vol.dtype), "axis": int(axis),
-                     "sha1": hashlib.sha1(np.ascontiguousarray(vol).tobytes()).hexdigest(),
-                     "params": {k: repr(v) for k, v in sorted(params.items())}}
-
-    def _meta_path(self):
-        return os.path.join(self.folder, "meta.json")
-
-    def load(self):
-        """{slice index: SegmentedMesh} already done; creates the folder if new."""
-        import json
-
-        if not os.path.isdir(self.folder):
-            try:
-                os.makedirs(self.folder)
-            except OSError as exc:
-                raise InputError(f"{self.folder}: cannot make the checkpoint folder ({exc.strerror})") from None
-        if os.path.exists(self._meta_path()):
-            with open(self._meta_path()) as fh:
-                old = json.load(fh)
-            if old != self.meta:
-                differs = sorted(k for k in set(old) | set(self.meta) if old.get(k) != self.meta.get(k))
-                if "params" in differs:
-                    differs.remove("params")
-                    differs += sorted(k for k in set(old["params"]) | set(self.meta["params"])
-                                      if old["params"].get(k) != self.meta["params"].get(k))
-                raise ResumeError(f"{self.folder}: these slices were made from another input or "
-                                 f"other parameters (differs in: {', '.join(differs)}); delete "
-                                 "the folder or run without resuming")
-        else:
-            with open(self._meta_path(), "w") as fh:
-                json.dump(self.meta, fh)
-        done = {}
-        for name in sorted(os.listdir(self.folder)):
-            if name.startswith("slice_") and name.endswith(".npz"):
-                done[int(name[6:-4])] = _load_slice(os.path.join(self.folder, name))
-        return done
-
-    def save(self, k, seg):
-        path = os.path.join(self.folder, f"slice_{k:05d}.npz")
-        tmp = path + ".tmp.npz"
-        _save_slice(tmp, seg)
-        os.replace(tmp, path)
-
-
-_SLICE_ARRAYS = ("points", "triangles", "material", "gray", "boundary_edges",
-                 "boundary_sides", "material_gray", "adjacency")
-
-
-def _save_slice(path, seg):
-    import json
-
-    np.savez(path, shape=np.array(seg.shape), diagnostics=np.array(json.dumps(seg.diagnostics)),
-             **{name: getattr(seg, name) for name in _SLICE_ARRAYS})
-
-
-def _load_slice(path):
-    import json
-
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            return SegmentedMesh(shape=tuple(int(v) for v in z["shape"]),
-                                 diagnostics=json.loads(str(z["diagnostics"])),
-                                 **{name: z[name] for name in _SLICE_ARRAYS})
-    except Exception as exc:
-        raise InputError(f"{path}: a damaged checkpoint slice ({exc}); delete it") from None
-
-
 def _slice_result(get, k):
     try:
         return get()
@@ -272,30 +163,27 @@ def _slice_result(get, k):
         raise type(exc)(f"slice {k}: {exc}") from exc
 
 
-def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=None,
-                   progress=None, keep_maps=(), checkpoint=None, **params):
+def segment_volume(volume, params=None, *, client=None, progress=None, keep_maps=(),
+                   checkpoint=None, **overrides):
     """Segment a 3D volume slice by slice into triangle meshes with one numbering of the
     materials for the whole volume.
 
     The gray map onto 0-255 (:func:`ctseg.intensity.gray_scale`) and the material levels
-    (:func:`ctseg.pipeline.material_levels`) are measured once on the volume (on evenly
-    spaced whole slices, at most 2^25 voxels), then every slice is segmented against them
-    (:func:`ctseg.segment_image` with ``gray_scale`` and ``levels_255``): material k is the
-    same material in every slice, whether or not a slice holds it. A volume of one slice is
-    a 2D problem with the volume's numbering.
+    (:func:`ctseg.levels.material_levels`) are measured once on the volume (on evenly
+    spaced whole slices, at most :data:`LEVEL_SAMPLE_VOXELS` voxels), then every slice is
+    segmented against them (:func:`ctseg.segment_image` with ``gray_scale`` and
+    ``levels_255``): material k is the same material in every slice, whether or not a
+    slice holds it. A volume of one slice is a 2D problem with the volume's numbering.
 
     Parameters
     ----------
     volume : (nz, ny, nx) array_like
         The CT volume (a (rows, cols) array is one slice).
-    axis : {'z', 'y', 'x'} or {0, 1, 2}
-        Slice axis (see :func:`volume_slice` for the orientation of each slice).
-    n_sites : int, optional
-        Sites per slice; default one per 128 pixels of a slice.
-    seed : int
-        Seed of every slice's random initialisation.
-    n_jobs : int
-        Local worker processes (1 = in this process, 0 = one per CPU core).
+    params : ctseg.params.SegmentParams or dict, optional
+        All parameters; ``overrides`` change single ones by name. ``axis`` ('z', 'y', 'x';
+        or 0, 1, 2 in numpy order) is the slice axis (see
+        :func:`ctseg.geometry.volume_slice`), ``n_jobs`` the local worker processes
+        (1 = this process; 'auto' = one per CPU core); ``n_sites`` counts per slice.
     client : distributed.Client or str, optional
         A Dask client, or a scheduler address to connect to for this call; slices then run
         on that cluster and ``n_jobs`` is ignored.
@@ -307,9 +195,7 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
         A folder where every finished slice is saved at once; slices already there, from
         a run on the same volume with the same parameters, are loaded instead of being
         computed again (resume after an interrupt or a failure). A folder from another
-        input or other parameters raises InputError saying what differs.
-    **params
-        Any keyword of :func:`ctseg.segment_image` (``n_materials``, ``lam``, ...).
+        input or other parameters raises ResumeError saying what differs.
 
     Returns
     -------
@@ -320,17 +206,21 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
     InputError
         Not a 3D (or 2D) finite numeric array; a slice's error names the slice.
     ParameterError
-        Unknown parameter, bad axis, n_jobs < 0.
+        Unknown parameter or a value out of its range.
+
+    Example
+    -------
+    >>> from ctseg.phantoms import make_volume
+    >>> vseg = segment_volume(make_volume(3, 48).image, n_sites=120, n_jobs=1)
+    >>> len(vseg.slices)
+    3
     """
+    if "axis" in overrides and not isinstance(overrides["axis"], str):
+        overrides["axis"] = "zyx"[slice_axis(overrides["axis"])]
+    p = resolve(params, **overrides)
     vol = as_volume(volume)
-    ax = slice_axis(axis)
-    unknown = sorted(set(params) - set(SEGMENT_DEFAULTS))
-    if unknown:
-        raise ParameterError(f"segment_volume: unknown parameter(s) {', '.join(unknown)}; "
-                             f"valid: {', '.join(sorted(SEGMENT_DEFAULTS))}")
-    n_jobs = check_number(n_jobs, "n_jobs", low=0, integer=True)
-    if n_jobs == 0:
-        n_jobs = os.cpu_count() or 1
+    ax = slice_axis(p.axis)
+    n_jobs = (os.cpu_count() or 1) if p.n_jobs == AUTO else p.n_jobs
     n_slices = vol.shape[ax]
     workers = 1 if client is not None else min(n_jobs, n_slices)
     slice_shape = [d for a, d in enumerate(vol.shape) if a != ax]
@@ -344,27 +234,23 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
     report(0.0, "gray levels")
     sample = _sample_slices(n_slices, vol.size // n_slices)
     stack = np.stack([as_image(volume_slice(vol, ax, k), name=f"slice {k}") for k in sample])
-    scale = gray_scale(stack)
-    level_keys = ("sigma", "density_floor", "density_saturation", "merge_k", "merge_rel",
-                  "merge_floor", "n_materials")
-    merged = {**SEGMENT_DEFAULTS, **params}
-    levels, pixel_sigma = material_levels(stack, scale, **{k: merged[k] for k in level_keys})
+    scale = gray_scale(stack, p.rescale_low_pct, p.rescale_high_pct)
+    levels, pixel_sigma = material_levels(stack, scale, **{k: getattr(p, k) for k in LEVEL_KEYS})
     del stack
-    slice_params = dict(params, n_sites=n_sites, seed=seed, gray_scale=scale, levels_255=levels)
-    slice_params.pop("n_materials", None)  # fixed by the levels
+    slice_params = p.replace(n_materials=AUTO)  # fixed by the levels
+    extra = dict(gray_scale=scale, levels_255=levels)
     t_levels = time.perf_counter() - t_start
 
     keep = {int(k) for k in keep_maps}
     store = None
     if checkpoint is not None:
-        store = _Checkpoint(checkpoint, vol, ax, {**SEGMENT_DEFAULTS, **params,
-                                                  "n_sites": n_sites, "seed": seed})
+        store = Checkpoint(checkpoint, vol, p)
     slices = [None] * n_slices
     if store is not None:
         for k, seg in store.load().items():
             if k not in keep:  # a figure slice is recomputed: its maps are not stored
                 slices[k] = seg
-    tasks = {k: (np.ascontiguousarray(volume_slice(vol, ax, k)), slice_params, k in keep)
+    tasks = {k: (np.ascontiguousarray(volume_slice(vol, ax, k)), slice_params, extra, k in keep)
              for k in range(n_slices) if slices[k] is None}
     resumed = n_slices - len(tasks)
 
@@ -402,6 +288,7 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
         "material_levels_255": [float(v) for v in levels],
         "material_noise_255": float(pixel_sigma),
         "material_gray": [float(v) for v in mat_gray],
+        "parameters": p.to_dict(),
         "n_materials": int(len(levels)),
         "n_triangles": int(sum(len(s.triangles) for s in slices)),
         "levels_time_s": t_levels,
@@ -412,14 +299,33 @@ def segment_volume(volume, axis="z", n_sites=None, seed=0, *, n_jobs=1, client=N
                               diagnostics=diagnostics)
 
 
-def volume_labels(vseg, shape):
-    """Per-voxel material labels of a volume segmentation (each slice rasterised)."""
-    from .metrics import label_image
+def segment_array(array, params=None, *, progress=None, client=None, keep_maps=(),
+                  checkpoint=None, **overrides):
+    """Segment a slice or a volume: :func:`ctseg.segment_image` for a 2D array,
+    :func:`segment_volume` for a 3D one (the one dispatch the command line, the VTK filter
+    and the Slicer module share).
 
-    out = np.zeros(shape, np.int64)
-    for k, seg in enumerate(vseg.slices):
-        lab = label_image(seg.points, seg.triangles, seg.material, seg.shape)
-        idx = [slice(None)] * 3
-        idx[vseg.axis] = k
-        out[tuple(idx)] = lab
-    return out
+    Parameters
+    ----------
+    array : (rows, cols) or (nz, ny, nx) array_like
+    params, progress, overrides
+        As in :func:`segment_volume`.
+    client, keep_maps, checkpoint
+        Volumes only, as in :func:`segment_volume`.
+
+    Returns
+    -------
+    SegmentedMesh or VolumeSegmentation
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> img = np.zeros((30, 30)); img[8:22, 8:22] = 1.0
+    >>> type(segment_array(img, n_sites=40)).__name__
+    'SegmentedMesh'
+    """
+    arr = np.asarray(array)
+    if arr.ndim == 2:
+        return segment_image(arr, params, progress=progress, **overrides)
+    return segment_volume(arr, params, client=client, progress=progress, keep_maps=keep_maps,
+                          checkpoint=checkpoint, **overrides)

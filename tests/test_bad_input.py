@@ -140,11 +140,14 @@ def test_valid_results(tmp_path, capsys, name, array, n_materials):
 
 # ---------------------------------------------------------------------- bad parameters
 @pytest.mark.parametrize("extra,words", [
-    (["--sites", "0"], ["n_sites", ">= 1"]),
     (["--sites", "-5"], ["n_sites"]),
-    (["--sites", "3"], ["n_sites", "at least 4"]),
+    (["--sites", "3"], ["n_sites", "[4,"]),
+    (["--sites", "many"], ["n_sites", "not a number"]),
     (["--sites", "100000"], ["n_sites", "at most 576"]),
-    (["--materials", "0"], ["n_materials"]),
+    (["--materials", "-1"], ["n_materials"]),
+    (["--set", "lamb=3"], ["lamb", "did you mean 'lam'"]),
+    (["--set", "lam"], ["NAME=VALUE"]),
+    (["--set", "init=grid"], ["init", "'ward'"]),
     (["--materials", "9"], ["n_materials", "9 materials"]),
     (["--seed", "-1"], ["seed"]),
     (["--jobs", "-2"], ["n_jobs"]),
@@ -160,9 +163,11 @@ def test_out_of_range_energy_parameters_through_the_api():
     import ctseg
     from ctseg.errors import ParameterError
 
-    for kw, word in [({"lam": -1.0}, "lam"), ({"beta": -0.1}, "beta"), ({"theta": -3.0}, "theta"),
+    for kw, word in [({"lam": -1.0}, "lam"), ({"beta": -0.1}, "beta"), ({"theta_255": -3.0}, "theta_255"),
+                     ({"theta": -3.0}, "theta_255"),
                      ({"step_threshold": -1.0}, "step_threshold"), ({"merge_k": -1.0}, "merge_k"),
-                     ({"merge_threshold": 0.0}, "merge_threshold"), ({"tol_px": 0.0}, "tol"),
+                     ({"merge_threshold": 0.0}, "merge_threshold"), ({"tol_px": 0.0}, "tol_px"),
+                     ({"lamda": 1.0}, "did you mean 'lam'"),
                      ({"init": "grid"}, "init")]:
         with pytest.raises(ParameterError, match=word):
             ctseg.segment_image(_disc(24), n_sites=30, **kw)

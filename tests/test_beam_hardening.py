@@ -7,7 +7,7 @@ import ctseg.beam_hardening as bh
 from ctseg.beam_hardening import correct_metal_streaks, fit_streak_weight, metal_streak_basis
 from ctseg.errors import InputError, ParameterError
 from ctseg.phantoms import make_phantom
-from ctseg.pipeline import flat_pixels
+from ctseg.levels import flat_pixels
 
 
 def part(shape=(96, 96)):

@@ -166,7 +166,7 @@ def test_amplified_correction_explains_a_thin_gap():
     first = np.full(len(gray), 200.0)  # the gap missed
     gap = truth == 0
     plain, _ = blur_corrected_gray(gray, mesh.points, mesh.triangles, first, image, sigma=1.0,
-                                   min_self_weight=1.0)
+                                   blur_min_self_weight=1.0)
     fixed, _ = blur_corrected_gray(gray, mesh.points, mesh.triangles, first, image, sigma=1.0)
     assert np.all(gray[gap] > 40)  # the blur lifted the gap
     np.testing.assert_allclose(plain[gap], gray[gap], atol=1e-6)  # nothing predicted there

@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 
 from ctseg import density_map, lloyd_cvt, ward_sites
-from ctseg.cvt import cvt_energy, nearest_site
 from ctseg.errors import InputError, ParameterError
 
 from conftest import disc_image
+from oracles import cvt_energy, nearest_site
 
 
 def brute_nearest_dist(points, sites):
@@ -88,8 +88,11 @@ def test_bad_inputs():
         lloyd_cvt(rho, np.array([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]]))
     with pytest.raises(InputError):
         lloyd_cvt(rho, np.array([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0], [20.0, 1.0]]))
-    with pytest.raises(ParameterError):
-        lloyd_cvt(rho, np.random.default_rng(0).uniform(0, 9, (6, 2)), tol=0)
+    sites = np.random.default_rng(0).uniform(0, 9, (6, 2))
+    for kw, word in (({"tol_px": 0}, "tol_px"), ({"max_iter": 0}, "max_iter"),
+                     ({"max_iter": 2.5}, "max_iter")):
+        with pytest.raises(ParameterError, match=word):
+            lloyd_cvt(rho, sites, **kw)
 
 
 def test_no_site_left_a_hair_from_another():
@@ -100,7 +103,7 @@ def test_no_site_left_a_hair_from_another():
     from ctseg import segment_image
     from ctseg.sites import initial_sites
     rho = density_map(img)
-    r = lloyd_cvt(rho, initial_sites(rho, 24, method="ward"))
+    r = lloyd_cvt(rho, initial_sites(rho, 24, init="ward"))
     d = np.hypot(*(r.sites[:, None, :] - r.sites[None, :, :]).transpose(2, 0, 1))
     assert d[np.triu_indices(len(r.sites), 1)].min() > 1e-3
     px = np.column_stack([c.ravel() for c in np.mgrid[0:4, 0:14][::-1]]).astype(float)

@@ -9,7 +9,8 @@ from ctseg.errors import InputError, ParameterError
 def test_spec_formula_without_saturation():
     rng = np.random.default_rng(1)
     img = rng.normal(size=(30, 40)).cumsum(axis=1)
-    rho = density_map(img, sigma=1.5, floor=0.05, saturation=None)
+    rho = density_map(img, density_sigma_px=1.5, density_floor=0.05, density_saturation=1.0,
+                      density_ridge=0.0)
     # independent evaluation of SPEC 1 on the min-max normalised image
     norm = (img - img.min()) / (img.max() - img.min())
     gy, gx = np.gradient(ndimage.gaussian_filter(norm, 1.5, mode="nearest"))
@@ -29,7 +30,7 @@ def test_range_and_edges_get_the_density():
 
 
 def test_constant_image_is_floor():
-    assert np.all(density_map(np.full((5, 7), 3.0), floor=0.1) == 0.1)
+    assert np.all(density_map(np.full((5, 7), 3.0), density_floor=0.1) == 0.1)
 
 
 @pytest.mark.parametrize("bad", [np.zeros(5), np.zeros((2, 3, 4)), np.array([[np.nan, 1], [1, 1]])])
@@ -38,7 +39,8 @@ def test_bad_images(bad):
         density_map(bad)
 
 
-@pytest.mark.parametrize("kw", [dict(sigma=-1), dict(floor=0), dict(saturation=2.0)])
+@pytest.mark.parametrize("kw", [dict(density_sigma_px=-1), dict(density_floor=0),
+                                dict(density_saturation=2.0)])
 def test_bad_parameters(kw):
     with pytest.raises(ParameterError):
         density_map(np.eye(4), **kw)
@@ -47,8 +49,8 @@ def test_bad_parameters(kw):
 def test_ridge_keeps_the_peak_on_the_edge_and_narrows_the_band():
     img = np.zeros((30, 40))
     img[:, 20:] = 100.0
-    flat_top = density_map(img, floor=0.02)
-    ridge = density_map(img, floor=0.02, ridge=2.0)
+    flat_top = density_map(img, density_ridge=0.0)
+    ridge = density_map(img, density_ridge=2.0)
     row = 15
     assert np.argmax(ridge[row]) in (19, 20) and ridge[row].max() > 0.99
     assert np.sum(ridge[row] > 0.5) < np.sum(flat_top[row] > 0.5)

@@ -3,7 +3,8 @@ import pytest
 
 from ctseg import delaunay_mesh, density_map, lloyd_cvt, triangle_gray, ward_sites
 from ctseg.errors import ParameterError
-from ctseg.materials import material_modes, segment_triangles, weighted_percentile
+from ctseg.levels import material_modes, weighted_percentile
+from ctseg.recursive_cut import segment_triangles
 from ctseg.triangulation import triangle_areas
 
 
@@ -73,7 +74,7 @@ def test_constant_gray_is_one_material():
 
 
 def test_fragmented_thin_layer_is_one_material_and_small_or_mixed_runs_are_not():
-    from ctseg.materials import _label_fragmented_layers
+    from ctseg.partial_volume import label_fragmented_layers
     # one triangle per leaf; leaves 0 (air) and 1 (steel) are labelled, the rest pending
     # run A: leaves 2-6 chained, all in the polymer core, 5 x 300 px  -> a layer
     # run B: leaves 7-8, polymer core, 2 x 300 px (below 1000 px)   -> left pending
@@ -87,5 +88,5 @@ def test_fragmented_thin_layer_is_one_material_and_small_or_mixed_runs_are_not()
     pairs = [(2, 3), (3, 4), (4, 5), (5, 6), (7, 8), (9, 10), (10, 11), (11, 12)]
     pairs += [(0, 2), (6, 1), (0, 7), (8, 1), (0, 9), (12, 1)]  # every run between air and steel
     adjacency = np.array(pairs)
-    _label_fragmented_layers(area, leaf, leaf_material, adjacency, nearest, in_core, 1000.0, 4)
+    label_fragmented_layers(area, leaf, leaf_material, adjacency, nearest, in_core, 1000.0, 4)
     assert leaf_material.tolist() == [0, 3, 1, 1, 1, 1, 1, -1, -1, -1, -1, -1, -1]

@@ -79,13 +79,10 @@ def test_outputs_consistent():
 
 def test_streak_correction_comes_before_every_stage(phantom_cache):
     # segmenting with the correction == segmenting the corrected image without it
-    from ctseg.pipeline import correct_streaks, SEGMENT_DEFAULTS
+    from ctseg.beam_hardening import correct_streaks
     p = phantom_cache(128, 0, ("air", "polymer", "aluminium", "steel"))
     seg = ctseg.segment_image(p.image, n_sites=300)
-    keys = ("sigma", "density_floor", "density_saturation", "merge_k", "merge_rel",
-            "merge_floor", "n_materials")
-    fixed = correct_streaks(p.image,
-                             **{k: SEGMENT_DEFAULTS[k] for k in keys})
+    fixed = correct_streaks(p.image)
     assert fixed.weight > 0 and seg.diagnostics["streak_correction"]["weight"] == fixed.weight
     np.testing.assert_array_equal(seg.corrected_image, fixed.image)
     ref = ctseg.segment_image(fixed.image, n_sites=300, streak_correction=False)

@@ -5,7 +5,7 @@ from hypothesis import strategies as st
 
 import ctseg
 from ctseg.meshcheck import mesh_check_report
-from ctseg.triangle_gray import pixel_overlaps
+from ctseg.raster import pixel_overlaps
 from ctseg.triangulation import triangle_areas
 
 

@@ -5,7 +5,10 @@ import pytest
 
 from ctseg import density_random_sites, lloyd_cvt, random_sites, ward_sites
 from ctseg.errors import ParameterError
-from ctseg.sites import ward_agglomerate, ward_cost
+from ctseg.params import AUTO, SPECS
+from ctseg.sites import INIT_METHODS, default_ward_block_px, initial_sites, ward_agglomerate
+
+from oracles import ward_cost
 
 
 def naive_ward(weights, points, edges, n_clusters):
@@ -69,11 +72,9 @@ def test_ward_sites_count_and_inside():
 def test_block_premerge_energy():
     """SPEC 2: the block pre-merge may not raise the final CVT energy by 1% or more.
 
-    Lloyd ends in a local minimum, so single cases differ either way by up to 4% (both
-    signs seen; the border sites added for each start's border regions make the counts
-    differ too); the criterion is on the mean over 16 phantoms, one-sided (a lower energy
-    is a better CVT). Measured: mean -0.01% (numpy 2.4 / scipy 1.17), +0.97% (the oldest
-    supported numpy 1.24 / scipy 1.10, whose phantoms differ slightly).
+    Lloyd ends in a local minimum, so single cases differ either way (the border sites
+    added for each start's border regions make the counts differ too); the criterion is on
+    the mean over 16 phantoms, one-sided (a lower energy is a better CVT).
     """
     from ctseg import density_map
     from ctseg.phantoms import make_phantom
@@ -81,7 +82,7 @@ def test_block_premerge_energy():
     rel = []
     for seed in range(16):
         rho = density_map(make_phantom(96, seed=seed, supersample=2).image)
-        exact = lloyd_cvt(rho, ward_sites(rho, 120, block_px=1))
+        exact = lloyd_cvt(rho, ward_sites(rho, 120, ward_block_px=1))
         fast = lloyd_cvt(rho, ward_sites(rho, 120))
         # the CVT may add border sites (a few, not always as many for both starts), and
         # a 2D CVT's energy falls as 1/n: compare F x n
@@ -110,3 +111,25 @@ def test_density_random_prefers_dense_pixels():
 def test_bad_site_counts(n):
     with pytest.raises(ParameterError):
         ward_sites(np.ones((4, 5)), n)
+
+
+def test_init_methods_are_the_spec_choices():
+    assert INIT_METHODS == SPECS["init"].choices
+    rho = np.random.default_rng(1).uniform(0.1, 1, (12, 14))
+    for init in INIT_METHODS:
+        assert initial_sites(rho, 9, init=init, seed=2).shape == (9, 2)
+    with pytest.raises(ParameterError, match="init"):
+        initial_sites(rho, 9, init="grid")
+
+
+def test_ward_block_px_auto_and_none_are_the_default():
+    rho = np.random.default_rng(2).uniform(0.1, 1, (40, 50))
+    ref = ward_sites(rho, 20)
+    for auto in (None, AUTO, "AUTO"):
+        assert np.array_equal(ward_sites(rho, 20, ward_block_px=auto), ref)
+        assert np.array_equal(initial_sites(rho, 20, ward_block_px=auto), ref)
+    assert np.array_equal(ward_sites(rho, 20, ward_block_px=default_ward_block_px(rho.shape, 20)),
+                          ref)
+    for bad in (0, 2.5, "big", -1):
+        with pytest.raises(ParameterError, match="ward_block_px"):
+            ward_sites(rho, 20, ward_block_px=bad)

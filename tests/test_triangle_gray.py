@@ -3,7 +3,7 @@ import pytest
 
 from ctseg import delaunay_mesh, triangle_gray
 from ctseg.errors import InputError
-from ctseg.triangle_gray import pixel_overlaps
+from ctseg.raster import pixel_overlaps
 from ctseg.triangulation import triangle_areas
 
 

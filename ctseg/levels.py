@@ -1,0 +1,244 @@
+"""Material gray levels (SPEC 7's data-driven defaults): the modes of the gray histogram
+of the pixels away from edges, on the 0-255 scale, for one slice or a stack of slices."""
+import numpy as np
+from scipy.ndimage import gaussian_filter1d, uniform_filter
+
+from .density import density_map
+from .errors import ParameterError
+from .intensity import rescale_gray
+from .params import AUTO, DEFAULTS, check
+
+
+def weighted_percentile(values, weights, q):
+    """Percentile(s) q (0-100) of values weighted by weights (step-function inverse CDF)."""
+    v = np.asarray(values, float)
+    w = np.asarray(weights, float)
+    o = np.argsort(v, kind="stable")
+    cw = np.cumsum(w[o])
+    cw /= cw[-1]
+    idx = np.searchsorted(cw, np.asarray(q, float) / 100.0, side="left")
+    return v[o][np.clip(idx, 0, len(v) - 1)]
+
+
+def weighted_spread(values, weights):
+    """Standard deviation of the values between their weighted 1st and 99th percentiles.
+
+    Trimmed rather than median-based: the spread of a whole material's triangle grays
+    includes streaks and cupping, which a median absolute deviation would hide.
+    """
+    v = np.asarray(values, float)
+    w = np.asarray(weights, float)
+    lo, hi = weighted_percentile(v, w, [1.0, 99.0])
+    keep = (v >= lo) & (v <= hi)
+    if keep.sum() < 2:
+        return 0.0
+    return float(np.sqrt(np.cov(v[keep], aweights=w[keep])))
+
+
+def material_modes(gray, area, bandwidth, min_area, separation, n_modes=None):
+    """Material gray levels: the modes of the area-weighted histogram of triangle grays.
+
+    The histogram (0.25 gray-level bins on 0-255) is smoothed with a Gaussian of
+    ``bandwidth``. Neighbouring modes are merged, weakest first, while the valley between
+    them is above half the lower peak (no real separation) or they are closer than
+    ``separation(level)`` gray levels; a mode whose basin holds less than ``min_area`` is
+    merged into the neighbour it is least separated from. With ``n_modes`` the weakest
+    boundaries are merged until exactly that many modes remain, whatever the rules say.
+
+    Returns
+    -------
+    means : (K,) ndarray
+        Area-weighted mean gray of each mode's basin, ascending.
+    edges : (K - 1,) ndarray
+        Gray levels of the valleys between consecutive modes.
+    """
+    f = np.asarray(gray, float)
+    w = np.asarray(area, float)
+    bin_w = 0.25
+    nb = int(255.0 / bin_w) + 1
+    idx = np.clip(np.round(f / bin_w).astype(int), 0, nb - 1)
+    hist = gaussian_filter1d(np.bincount(idx, w, nb), max(bandwidth, bin_w) / bin_w, mode="constant")
+    interior = (hist[1:-1] > hist[:-2]) & (hist[1:-1] >= hist[2:])
+    peaks = list(np.flatnonzero(interior) + 1)
+    if hist[0] > hist[1]:
+        peaks.insert(0, 0)
+    if hist[-1] > hist[-2]:
+        peaks.append(nb - 1)
+    if not peaks:
+        peaks = [int(np.argmax(hist))]
+    cum = np.concatenate([[0.0], np.cumsum(np.bincount(idx, w, nb))])
+
+    def valley(i):  # position of the minimum between peaks i and i+1
+        a, b = peaks[i], peaks[i + 1]
+        return a + int(np.argmin(hist[a:b + 1]))
+
+    if n_modes is not None and len(peaks) < n_modes:
+        raise ParameterError(
+            f"n_materials: asked for {n_modes} materials but the gray values show only "
+            f"{len(peaks)} distinct levels")
+    while len(peaks) > 1:
+        vals = [valley(i) for i in range(len(peaks) - 1)]
+        bounds = [0] + [v + 1 for v in vals] + [nb]
+        mass = np.array([cum[bounds[k + 1]] - cum[bounds[k]] for k in range(len(peaks))])
+        ratio = np.array([hist[vals[i]] / max(min(hist[peaks[i]], hist[peaks[i + 1]]), 1e-300)
+                          for i in range(len(vals))])
+        gap = np.array([(peaks[i + 1] - peaks[i]) * bin_w / separation(peaks[i + 1] * bin_w)
+                        for i in range(len(vals))])
+        # weakness of each boundary: high valley or small gap means no real separation
+        weak = np.maximum(ratio / 0.5, 1.0 / np.maximum(gap, 1e-300))
+        small = np.flatnonzero(mass < min_area)
+        if n_modes is not None:
+            if len(peaks) == n_modes:
+                break
+            i = int(np.argmax(weak))
+        elif weak.max() >= 1.0:
+            i = int(np.argmax(weak))
+        elif len(small):
+            k = int(small[np.argmin(mass[small])])
+            cand = [i for i in (k - 1, k) if 0 <= i < len(vals)]
+            i = max(cand, key=lambda j: weak[j])
+        else:
+            break
+        keep = peaks[i] if hist[peaks[i]] >= hist[peaks[i + 1]] else peaks[i + 1]
+        peaks[i:i + 2] = [keep]
+    vals = [valley(i) for i in range(len(peaks) - 1)]
+    edges = np.array([(v + 0.5) * bin_w for v in vals])
+    basin = np.searchsorted(edges, f)
+    means = np.array([np.average(f[basin == k], weights=w[basin == k]) if np.any(basin == k)
+                      else peaks[k] * bin_w for k in range(len(peaks))])
+    return means, edges
+
+
+def dominant_spread(values, weights):
+    """Noise of a whole material: the spread of the values in the heaviest coarse mode."""
+    coarse, cedges = material_modes(values, weights, 2.0, 0.0, lambda g: 8.0)
+    basin = np.searchsorted(cedges, values)
+    dom = basin == np.argmax(np.bincount(basin, weights, len(coarse)))
+    return weighted_spread(values[dom], weights[dom]) if dom.sum() > 1 else 0.0
+
+
+def pixel_material_levels(image255, flat, merge_k=DEFAULTS.merge_k,
+                          merge_rel=DEFAULTS.merge_rel, merge_floor_255=DEFAULTS.merge_floor_255,
+                          merge_threshold_255=DEFAULTS.merge_threshold_255,
+                          level_min_fraction=DEFAULTS.level_min_fraction,
+                          n_materials=DEFAULTS.n_materials):
+    """Material gray levels from the pixels away from edges (SPEC 7's data-driven defaults).
+
+    Parameters
+    ----------
+    image255 : (rows, cols) or (n, rows, cols) array_like
+        The image, or a stack of slices, on the 0-255 scale
+        (:func:`ctseg.intensity.rescale_gray`).
+    flat : bool array_like, the shape of ``image255``
+        Pixels away from edges (e.g. where the density map is below half its range).
+    merge_k, merge_rel, merge_floor_255 : float
+        Separation rule of :func:`material_modes`: ``max(merge_floor_255, merge_k * sigma)
+        + merge_rel * gray``, sigma the spread of the flat pixels of the dominant mode,
+        smoothed over 3 x 3.
+    merge_threshold_255 : float or 'auto'
+        A fixed separation instead of that rule.
+    level_min_fraction : float
+        Share of the flat pixels a level must hold.
+    n_materials : int or 'auto'
+        Exactly this many levels (the least separated modes merged).
+
+    Returns
+    -------
+    levels : (K,) ndarray, ascending
+    sigma : float
+        The noise used (0-255 scale).
+    """
+    merge_k, merge_rel = check("merge_k", merge_k), check("merge_rel", merge_rel)
+    merge_floor_255 = check("merge_floor_255", merge_floor_255)
+    merge_threshold_255 = check("merge_threshold_255", merge_threshold_255)
+    level_min_fraction = check("level_min_fraction", level_min_fraction)
+    n_materials = check("n_materials", n_materials)
+    n_modes = None if n_materials == AUTO else n_materials
+    img = np.asarray(image255, float)
+    # smooth within each slice only: neighbouring slices can be far apart
+    img = uniform_filter(img, (1,) * (img.ndim - 2) + (3, 3), mode="nearest")
+    flat = np.asarray(flat, bool)
+    v = img[flat] if flat.sum() >= 16 else img.ravel()
+    w = np.ones(len(v))
+    sigma = dominant_spread(v, w)
+    base = max(merge_floor_255, merge_k * sigma)
+    if merge_threshold_255 == AUTO:
+        separation = lambda g: base + merge_rel * g  # noqa: E731
+    else:
+        separation = lambda g: merge_threshold_255  # noqa: E731
+    levels, _ = material_modes(v, w, max(sigma, 0.5),
+                               0.0 if n_modes else level_min_fraction * len(v), separation,
+                               n_modes=n_modes)
+    return levels, sigma
+
+
+def flat_pixels(image, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAULTS.density_floor,
+                density_saturation=DEFAULTS.density_saturation):
+    """Pixels away from material edges: the un-sharpened density below half its range.
+
+    These pixels measure the material gray levels (:func:`material_levels`); the ridge
+    sharpening of the density is left out because it thins the edge bands.
+
+    Parameters
+    ----------
+    image : (rows, cols) array_like
+    flat_sigma_px : float
+        Smoothing of the gradient (as ``density_sigma_px`` in :func:`ctseg.density_map`).
+    density_floor, density_saturation
+        As in :func:`ctseg.density_map`.
+
+    Returns
+    -------
+    flat : (rows, cols) bool ndarray
+
+    Example
+    -------
+    >>> img = np.zeros((20, 20)); img[:, 10:] = 1.0
+    >>> flat = flat_pixels(img)
+    >>> bool(flat[:, 0].all()), bool(flat[:, 9:11].any())
+    (True, False)
+    """
+    strength = density_map(image, density_sigma_px=flat_sigma_px, density_floor=density_floor,
+                           density_saturation=density_saturation, density_ridge=0.0)
+    return (strength - density_floor) < 0.5
+
+
+def material_levels(images, scale, *, flat_sigma_px=DEFAULTS.flat_sigma_px,
+                    density_floor=DEFAULTS.density_floor,
+                    density_saturation=DEFAULTS.density_saturation, merge_k=DEFAULTS.merge_k,
+                    merge_rel=DEFAULTS.merge_rel, merge_floor_255=DEFAULTS.merge_floor_255,
+                    merge_threshold_255=DEFAULTS.merge_threshold_255,
+                    level_min_fraction=DEFAULTS.level_min_fraction,
+                    n_materials=DEFAULTS.n_materials):
+    """Material gray levels (0-255 scale) seen in one slice or in a stack of slices.
+
+    The modes of the histogram of the pixels away from edges
+    (:func:`pixel_material_levels` on :func:`flat_pixels`). Given a stack, the pixels of
+    all its slices count together, so every slice of a volume is labelled against the
+    same levels and material numbers agree across slices.
+
+    Parameters
+    ----------
+    images : (rows, cols) or (n, rows, cols) array_like
+    scale : (offset, factor)
+        The map onto 0-255 (:func:`ctseg.intensity.gray_scale`).
+    flat_sigma_px, density_floor, density_saturation
+        Define the flat pixels (:func:`flat_pixels`).
+    merge_k, merge_rel, merge_floor_255, merge_threshold_255, level_min_fraction, n_materials
+        As in :func:`pixel_material_levels`.
+
+    Returns
+    -------
+    levels : (K,) ndarray, ascending
+    sigma_255 : float
+        Noise of the dominant material's flat pixels (0-255 scale).
+    """
+    stack = np.asarray(images)
+    stack = stack[None] if stack.ndim == 2 else stack
+    g255 = np.stack([rescale_gray(sl, scale=scale)[0] for sl in stack])
+    flat = np.stack([flat_pixels(sl, flat_sigma_px, density_floor, density_saturation)
+                     for sl in stack])
+    return pixel_material_levels(g255, flat, merge_k=merge_k, merge_rel=merge_rel,
+                                 merge_floor_255=merge_floor_255,
+                                 merge_threshold_255=merge_threshold_255,
+                                 level_min_fraction=level_min_fraction, n_materials=n_materials)
