@@ -49,7 +49,8 @@ def run_case(size, seed, materials, photons=1e6, **params):
 
 
 def table(results):
-    rows = ["| slice | materials | found | Dice per material | min Dice | min Dice, sub-pixel truth | boundary px (mean; mesh->truth, truth->mesh) | time s |",
+    rows = ["| slice | materials | found | Dice per material | min Dice | min Dice, sub-pixel truth "
+            "| boundary px (mean; mesh->truth, truth->mesh) | time s |",
             "|---|---|---|---|---|---|---|---|"]
     for r in results:
         b = r["boundary_px"]

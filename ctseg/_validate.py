@@ -51,3 +51,28 @@ def check_number(value, name, low=None, high=None, low_open=False, high_open=Fal
     if high is not None and (value > high or (high_open and value == high)):
         raise ParameterError(f"{name}: must be {'<' if high_open else '<='} {high}, got {value!r}")
     return value
+
+
+def as_volume(volume, name="volume"):
+    """Return ``volume`` as a 3D numeric array (a 2D one as one slice), or raise InputError
+    saying what is wrong. NaN and infinite values are refused here, before any slice runs."""
+    try:
+        vol = np.asarray(volume)
+    except Exception as exc:
+        raise InputError(f"{name}: cannot be read as an array ({exc})") from None
+    if vol.ndim == 2:
+        vol = vol[None]
+    if vol.ndim != 3:
+        raise InputError(f"{name}: expected a 3D array (slices, rows, cols), got shape {vol.shape}")
+    if vol.size == 0:
+        raise InputError(f"{name}: the array is empty (shape {vol.shape})")
+    if vol.dtype == object or not (np.issubdtype(vol.dtype, np.number) or vol.dtype == bool) \
+            or np.iscomplexobj(vol):
+        raise InputError(f"{name}: expected real numbers, got dtype {vol.dtype}")
+    if np.issubdtype(vol.dtype, np.floating):
+        bad = ~np.isfinite(vol)
+        if bad.any():
+            k, r, c = np.argwhere(bad)[0]
+            raise InputError(f"{name}: {int(bad.sum())} voxel(s) are NaN or infinite (first in "
+                             f"slice {k}, row {r}, col {c})")
+    return vol

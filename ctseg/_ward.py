@@ -11,14 +11,14 @@ from numba import njit
 # Compiled (numba): the pure-Python heap took 0.4-0.6 s of 5.0 s at 512 x 512 / 1000 sites
 # and grows with the pixel count.
 @njit(cache=True)
-def _ward_merges(w, sx, sy, ea, eb, m, n_clusters):
+def _ward_merges(w, s, ea, eb, m, n_clusters):
     """Greedy Ward merges on the graph (ea[k], eb[k]) until n_clusters remain.
 
     Same order as a textbook lazy-deletion heap of (cost, i, j, version_i, version_j) with
     i < j: the tuples order the merges completely, so ties go to the smaller indices.
     Neighbour lists are linked lists in one record pool; a merge splices j's list onto
-    i's, then compacts i's to distinct live clusters. Updates w, sx, sy (weight and
-    weighted coordinate sums) in place; returns each node's parent (the node it merged
+    i's, then compacts i's to distinct live clusters. Updates w and s ((m, d): the weighted
+    coordinate sums, any dimension d) in place; returns each node's parent (the node it merged
     into, itself for a survivor) and the number of clusters left.
     """
     e = ea.shape[0]
@@ -46,7 +46,7 @@ def _ward_merges(w, sx, sy, ea, eb, m, n_clusters):
     for k in range(e):
         i = min(ea[k], eb[k])
         j = max(ea[k], eb[k])
-        heap.append((_ward_pair_cost(w, sx, sy, i, j), i, j, np.int64(0), np.int64(0)))
+        heap.append((_ward_pair_cost(w, s, i, j), i, j, np.int64(0), np.int64(0)))
     heapq.heapify(heap)
     n_alive = m
     while n_alive > n_clusters and len(heap) > 0:
@@ -54,8 +54,8 @@ def _ward_merges(w, sx, sy, ea, eb, m, n_clusters):
         if not (alive[i] and alive[j]) or version[i] != vi or version[j] != vj:
             continue
         w[i] += w[j]
-        sx[i] += sx[j]
-        sy[i] += sy[j]
+        for ax in range(s.shape[1]):
+            s[i, ax] += s[j, ax]
         alive[j] = False
         parent[j] = i
         version[i] += 1
@@ -85,7 +85,7 @@ def _ward_merges(w, sx, sy, ea, eb, m, n_clusters):
             stamp[k] = n_alive
             a = min(i, k)
             b = max(i, k)
-            heapq.heappush(heap, (_ward_pair_cost(w, sx, sy, a, b), a, b, version[a], version[b]))
+            heapq.heappush(heap, (_ward_pair_cost(w, s, a, b), a, b, version[a], version[b]))
             prev = r
             r = nxt[r]
         tail[i] = prev
@@ -96,9 +96,11 @@ def _ward_merges(w, sx, sy, ea, eb, m, n_clusters):
 
 
 @njit(cache=True)
-def _ward_pair_cost(w, sx, sy, i, j):
+def _ward_pair_cost(w, s, i, j):
     wi = w[i]
     wj = w[j]
-    dx = sx[i] / wi - sx[j] / wj
-    dy = sy[i] / wi - sy[j] / wj
-    return wi * wj / (wi + wj) * (dx * dx + dy * dy)
+    d2 = 0.0  # 0.0 + dx * dx + dy * dy: the same bits as dx * dx + dy * dy
+    for ax in range(s.shape[1]):
+        d = s[i, ax] / wi - s[j, ax] / wj
+        d2 += d * d
+    return wi * wj / (wi + wj) * d2

@@ -181,7 +181,8 @@ def correct_metal_streaks(image, levels, *, flat=None,
     -----
     The weight is kept only when positive (beam hardening makes rays through metal read
     too *little* attenuation, never too much) and when the correction removes at least
-    ``streak_min_explained`` of the within-material variance (less is fitting noise). The streak basis assumes parallel-beam
+    ``streak_min_explained`` of the within-material variance (less is fitting noise). The
+    streak basis assumes parallel-beam
     geometry over the whole image; a crop that cuts off metal, or fan/cone-beam data,
     fit less well and get a smaller weight.
     """

@@ -6,7 +6,7 @@ import os
 import numpy as np
 
 from .errors import InputError, ResumeError
-from .params import RUN_GROUPS, SPECS
+from .params import RUN_ONLY
 from .pipeline import SegmentedMesh
 
 
@@ -23,7 +23,7 @@ class Checkpoint:
         import hashlib
 
         self.folder = os.fspath(folder)
-        result = {k: v for k, v in params.flat().items() if SPECS[k].group not in RUN_GROUPS}
+        result = {k: v for k, v in params.flat().items() if k not in RUN_ONLY}
         self.meta = {"shape": list(vol.shape), "dtype": str(vol.dtype), "axis": params.axis,
                      "sha1": hashlib.sha1(np.ascontiguousarray(vol).tobytes()).hexdigest(),
                      "params": result}

@@ -9,14 +9,10 @@ from ._validate import as_image
 from .blur import blur_corrected_gray, region_levels
 from .errors import ParameterError
 from .intensity import rescale_gray
-from .levels import material_levels
+from .levels import LEVEL_KEYS, material_levels
 from .params import AUTO, resolve
 from .recursive_cut import order_by_gray, segment_triangles
 from .triangulation import triangle_areas
-
-LEVEL_KEYS = ("flat_sigma_px", "density_floor", "density_saturation", "merge_k", "merge_rel",
-              "merge_floor_255", "merge_threshold_255", "level_min_fraction", "n_materials")
-"""The parameters of :func:`ctseg.levels.material_levels`."""
 
 CUT_KEYS = ("step_threshold_255", "merge_k", "merge_rel", "merge_floor_255",
             "merge_threshold_255", "min_triangles", "max_depth", "min_material_area",

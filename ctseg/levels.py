@@ -3,10 +3,16 @@ of the pixels away from edges, on the 0-255 scale, for one slice or a stack of s
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, uniform_filter
 
+from ._validate import as_image
 from .density import density_map
 from .errors import ParameterError
-from .intensity import rescale_gray
+from .geometry import slice_axis, volume_slice
+from .intensity import gray_scale, rescale_gray
 from .params import AUTO, DEFAULTS, check
+
+LEVEL_KEYS = ("flat_sigma_px", "density_floor", "density_saturation", "merge_k", "merge_rel",
+              "merge_floor_255", "merge_threshold_255", "level_min_fraction", "n_materials")
+"""The parameters of :func:`material_levels`."""
 
 
 def weighted_percentile(values, weights, q):
@@ -242,3 +248,36 @@ def material_levels(images, scale, *, flat_sigma_px=DEFAULTS.flat_sigma_px,
                                  merge_floor_255=merge_floor_255,
                                  merge_threshold_255=merge_threshold_255,
                                  level_min_fraction=level_min_fraction, n_materials=n_materials)
+
+
+LEVEL_SAMPLE_VOXELS = 1 << 25
+"""At most this many voxels (evenly spaced whole slices) measure the gray map and levels."""
+
+
+def _sample_slices(n_slices, slice_voxels):
+    """Evenly spaced slice indices whose voxels stay within LEVEL_SAMPLE_VOXELS."""
+    n_keep = max(1, min(n_slices, LEVEL_SAMPLE_VOXELS // max(slice_voxels, 1)))
+    return np.unique(np.linspace(0, n_slices - 1, n_keep).round().astype(int))
+
+
+def volume_levels(volume, params, axis=0):
+    """The gray map onto 0-255 and the material levels of a whole volume, measured on
+    evenly spaced whole slices along ``axis`` (at most :data:`LEVEL_SAMPLE_VOXELS`
+    voxels) with :func:`ctseg.intensity.gray_scale` and :func:`material_levels`.
+
+    Returns
+    -------
+    scale : (offset, factor)
+    levels_255 : (K,) ndarray
+    sigma_255 : float
+        The noise of the flat pixels of the dominant material.
+    sample : (s,) int ndarray
+        The slices measured.
+    """
+    ax = slice_axis(axis)
+    n_slices = volume.shape[ax]
+    sample = _sample_slices(n_slices, volume.size // n_slices)
+    stack = np.stack([as_image(volume_slice(volume, ax, k), name=f"slice {k}") for k in sample])
+    scale = gray_scale(stack, params.rescale_low_pct, params.rescale_high_pct)
+    levels, sigma = material_levels(stack, scale, **{k: getattr(params, k) for k in LEVEL_KEYS})
+    return scale, levels, sigma, sample

@@ -67,6 +67,9 @@ class SiteParams(_Group):
                        choices=("ward", "random", "density_random"), vtk="Initialization")
     seed: int = _param(0, "int", "seed of the random initialisations", low=0,
                        high=2 ** 31 - 1, cli="--seed")
+    voxels_per_site: float = _param(256.0, "float", "voxels per site in 3D mode when n_sites is "
+                                    "auto (at least 64 sites, at most one per voxel)",
+                                    "voxels", low=1.0, high=1e9)
     ward_block_px: int = _param(AUTO, "int", "Ward pre-merge block side (1 = exact Ward); "
                                 "auto = about 16 blocks per site", "px", low=1, high=1024,
                                 auto=True, vtk="WardBlockPixels")
@@ -183,11 +186,15 @@ class CorrectionParams(_Group):
 
 @dataclass(frozen=True)
 class VolumeParams(_Group):
-    """How a volume is run: these change where the work happens, never the result."""
+    """How a volume is meshed, and where the work happens (n_jobs never changes the
+    result)."""
 
     group = "volume"
-    axis: str = _param("z", "choice", "slice axis of a volume", choices=("z", "y", "x"),
-                       vtk="SliceAxis", cli="--axis")
+    mode: str = _param("slices", "choice", "how a volume is meshed: slice by slice "
+                       "(triangles per slice) or in 3D (tetrahedra and closed surfaces)",
+                       choices=("slices", "3d"), vtk="Mode", cli="--mode")
+    axis: str = _param("z", "choice", "slice axis of a volume in slices mode",
+                       choices=("z", "y", "x"), vtk="SliceAxis", cli="--axis")
     n_jobs: int = _param(AUTO, "int", "worker processes for a volume's slices (1 = this "
                          "process); auto = one per core", low=1, high=4096, auto=True,
                          vtk="NumberOfJobs", cli="--jobs")
@@ -196,8 +203,8 @@ class VolumeParams(_Group):
 GROUPS = (DensityParams, SiteParams, CVTParams, LevelParams, GraphCutParams,
           RecursionParams, CorrectionParams, VolumeParams)
 
-RUN_GROUPS = ("volume",)
-"""Groups that do not change the result (left out of the resume key)."""
+RUN_ONLY = ("n_jobs",)
+"""Parameters that never change the result (left out of the resume key)."""
 
 ALIASES = {
     # earlier keyword names, kept so that existing calls keep working
@@ -284,8 +291,8 @@ class SegmentParams:
     def result_key(self):
         """Canonical JSON of every parameter that can change the result (the resume key)."""
         d = self.to_dict()
-        for g in RUN_GROUPS:
-            d.pop(g)
+        for name in RUN_ONLY:
+            d[_WHERE[name]].pop(name)
         return json.dumps(d, sort_keys=True)
 
 

@@ -1,8 +1,10 @@
-"""Stage 2: initial CVT sites: Ward's method, random and density-weighted random (paper 5.2, SPEC 2)."""
+"""Stage 2: initial CVT sites: Ward's method, random and density-weighted random (paper 5.2,
+SPEC 2; on voxels SPEC 9.2)."""
 import numpy as np
 
 from ._validate import check_number
 from ._ward import _ward_merges
+from .density import check_spacing
 from .errors import InputError, ParameterError
 from .params import AUTO, DEFAULTS, SPECS, check
 
@@ -41,8 +43,8 @@ def ward_agglomerate(weights, centroids, edges, n_clusters):
     ----------
     weights : (m,) array_like
         Positive node weights (sum of rho over the node's pixels).
-    centroids : (m, 2) array_like
-        Weighted centroid of each node.
+    centroids : (m, d) array_like
+        Weighted centroid of each node (d = 2 for pixels, 3 for voxels).
     edges : (e, 2) int array_like
         Node pairs allowed to merge (the graph must be connected).
     n_clusters : int
@@ -53,7 +55,7 @@ def ward_agglomerate(weights, centroids, edges, n_clusters):
     labels : (m,) int ndarray
         Cluster of each node, numbered 0..n_clusters-1 in order of first appearance.
     cluster_weights : (n_clusters,) ndarray
-    cluster_centroids : (n_clusters, 2) ndarray
+    cluster_centroids : (n_clusters, d) ndarray
 
     References
     ----------
@@ -61,12 +63,11 @@ def ward_agglomerate(weights, centroids, edges, n_clusters):
     """
     w = np.ascontiguousarray(weights, dtype=np.float64).copy()
     c = np.asarray(centroids, dtype=np.float64)
-    sx = np.ascontiguousarray(c[:, 0] * w)
-    sy = np.ascontiguousarray(c[:, 1] * w)
+    s = np.ascontiguousarray(c * w[:, None])
     m = len(w)
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     edges = edges[edges[:, 0] != edges[:, 1]]
-    parent, n_alive = _ward_merges(w, sx, sy, np.ascontiguousarray(edges[:, 0]),
+    parent, n_alive = _ward_merges(w, s, np.ascontiguousarray(edges[:, 0]),
                                    np.ascontiguousarray(edges[:, 1]), m, int(n_clusters))
     if n_alive > n_clusters:
         raise InputError(
@@ -82,7 +83,7 @@ def ward_agglomerate(weights, centroids, edges, n_clusters):
     _, labels = np.unique(root, return_inverse=True)
     roots = np.unique(root)
     cw = w[roots]
-    cc = np.column_stack([sx[roots], sy[roots]]) / cw[:, None]
+    cc = s[roots] / cw[:, None]
     return labels.reshape(-1), cw, cc
 
 
@@ -233,3 +234,166 @@ def initial_sites(rho, n_sites, init=DEFAULTS.init, seed=DEFAULTS.seed,
     if init == "random":
         return random_sites(np.shape(rho), n_sites, seed=seed)
     return density_random_sites(rho, n_sites, seed=seed)
+
+
+# ---- 3D (SPEC 9.2): sites (x, y, z) in physical units, voxel (k, j, i) at (i sx, j sy, k sz)
+
+def _checked_3d(rho, n_sites, spacing):
+    """rho (3D, every side >= 2, finite, > 0: else InputError), n_sites (8..voxels) and the
+    spacing, checked."""
+    rho = np.asarray(rho, dtype=np.float64)
+    if rho.ndim != 3 or min(rho.shape) < 2:
+        raise InputError(f"density: expected a 3D array (nz, ny, nx) with every side >= 2, "
+                         f"got shape {rho.shape}")
+    if not np.all(np.isfinite(rho)) or rho.min() <= 0:
+        raise InputError("density: values must be finite and > 0")
+    n_sites = check_number(n_sites, "n_sites", low=8, integer=True)
+    if n_sites > rho.size:
+        raise ParameterError(f"n_sites: {n_sites} sites for a volume of only {rho.size} voxels; "
+                             f"use at most {rho.size} (each site sits in its own voxel)")
+    return rho, n_sites, check_spacing(spacing)
+
+
+def ward_block_sides_3d(shape, spacing, n_sites, ward_block_px=DEFAULTS.ward_block_px):
+    """Voxels per Ward pre-merge block along (z, y, x).
+
+    ``ward_block_px`` is the side in voxels along the finest axis; along an axis of spacing
+    s it is ``max(1, round(ward_block_px * min(spacing) / s))``: about cubes in physical
+    units. 'auto' (or None): ``int(L / min(spacing))`` with ``L**3 = volume / (16
+    n_sites)``, about 16 blocks per final site (as :func:`default_ward_block_px` in 2D).
+    """
+    sp = check_spacing(spacing)
+    block_px = check("ward_block_px", ward_block_px)
+    if block_px == AUTO:
+        vol = float(np.prod(shape)) * float(np.prod(sp))
+        block_px = max(1, int(np.cbrt(vol / (16.0 * n_sites)) / sp.min()))
+    return tuple(max(1, int(round(block_px * sp.min() / s))) for s in sp[::-1])
+
+
+def _block_graph_3d(rho, sp, sides):
+    """Pre-merge voxels into blocks of ``sides`` (z, y, x) voxels: weights, physical
+    weighted centroids (x, y, z) and the 6-connected block adjacency."""
+    nb = tuple(-(-n // b) for n, b in zip(rho.shape, sides))
+    kk, jj, ii = np.indices(rho.shape)
+    block = np.ravel_multi_index((kk // sides[0], jj // sides[1], ii // sides[2]), nb).ravel()
+    r = rho.ravel()
+    n_blocks = int(np.prod(nb))
+    w = np.bincount(block, r, n_blocks)
+    cols = [np.bincount(block, r * (q.ravel() * s), n_blocks) / w
+            for q, s in ((ii, sp[0]), (jj, sp[1]), (kk, sp[2]))]
+    ids = np.arange(n_blocks).reshape(nb)
+    e = np.concatenate([np.column_stack([a.ravel(), b.ravel()]) for a, b in (
+        (ids[:, :, :-1], ids[:, :, 1:]), (ids[:, :-1], ids[:, 1:]), (ids[:-1], ids[1:]))])
+    return w, np.column_stack(cols), e
+
+
+def _voxel_sites(flat, shape, sp):
+    k, j, i = np.unravel_index(flat, shape)
+    return np.column_stack([i * sp[0], j * sp[1], k * sp[2]]).astype(np.float64)
+
+
+def ward_sites_3d(rho, n_sites, spacing=(1.0, 1.0, 1.0), ward_block_px=DEFAULTS.ward_block_px):
+    """Initial 3D sites by connectivity-constrained, rho-weighted Ward clustering of voxels.
+
+    The voxels are pre-merged into blocks (:func:`ward_block_sides_3d`; 1 = exact Ward on
+    the voxels); :func:`ward_agglomerate` then merges 6-connected blocks, weights the sums
+    of rho, until ``n_sites`` clusters remain; the sites are their rho-weighted centroids
+    in physical coordinates. Blocks coarser than ``n_sites`` fall back to voxels.
+
+    Parameters
+    ----------
+    rho : (nz, ny, nx) array_like
+        Density (> 0), e.g. from :func:`ctseg.density.density_volume`.
+    n_sites : int
+        Number of sites, 8 <= n_sites <= number of voxels.
+    spacing : (3,) array_like, optional
+        Voxel spacing (sx, sy, sz), each > 0.
+    ward_block_px : int or 'auto', optional
+        Block side in voxels along the finest axis (see :func:`ward_block_sides_3d`).
+
+    Returns
+    -------
+    sites : (n_sites, 3) float64 ndarray
+        (x, y, z) physical, inside the box ``[0, (nx-1) sx] x [0, (ny-1) sy] x [0, (nz-1) sz]``.
+
+    Raises
+    ------
+    InputError
+        A density that is not 3D, finite and > 0 (ParameterError: a bad count, spacing, side).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> s = ward_sites_3d(np.ones((6, 8, 10)), 20, spacing=(0.5, 0.5, 1.5))
+    >>> s.shape, bool(s[:, 2].max() <= 7.5)
+    ((20, 3), True)
+    """
+    rho, n_sites, sp = _checked_3d(rho, n_sites, spacing)
+    sides = ward_block_sides_3d(rho.shape, sp, n_sites, ward_block_px)
+    w, c, e = _block_graph_3d(rho, sp, sides)
+    if len(w) < n_sites:  # blocks too coarse for this many sites: fall back to voxels
+        w, c, e = _block_graph_3d(rho, sp, (1, 1, 1))
+    _, _, centroids = ward_agglomerate(w, c, e, n_sites)
+    hi = (np.array(rho.shape[::-1]) - 1) * sp  # a weighted mean can round past the box
+    return np.clip(centroids, 0.0, hi)
+
+
+def random_sites_3d(shape, n_sites, spacing=(1.0, 1.0, 1.0), seed=DEFAULTS.seed):
+    """n_sites distinct voxel centres drawn uniformly, (x, y, z) physical."""
+    rho, n_sites, sp = _checked_3d(np.ones(tuple(int(v) for v in shape)), n_sites, spacing)
+    idx = np.random.default_rng(seed).choice(rho.size, size=n_sites, replace=False)
+    return _voxel_sites(idx, rho.shape, sp)
+
+
+def density_random_sites_3d(rho, n_sites, spacing=(1.0, 1.0, 1.0), seed=DEFAULTS.seed):
+    """n_sites distinct voxel centres drawn with probability proportional to rho, (x, y, z)
+    physical.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> s = density_random_sites_3d(np.ones((4, 5, 6)), 10, spacing=(1, 1, 2), seed=1)
+    >>> s.shape, bool(np.all(s[:, 2] % 2 == 0))
+    ((10, 3), True)
+    """
+    rho, n_sites, sp = _checked_3d(rho, n_sites, spacing)
+    p = rho.ravel() / rho.sum()
+    idx = np.random.default_rng(seed).choice(rho.size, size=n_sites, replace=False, p=p)
+    return _voxel_sites(idx, rho.shape, sp)
+
+
+def initial_sites_3d(rho, n_sites, spacing=(1.0, 1.0, 1.0), init=DEFAULTS.init,
+                     seed=DEFAULTS.seed, ward_block_px=DEFAULTS.ward_block_px):
+    """Initial 3D CVT sites by one of :data:`INIT_METHODS`.
+
+    Parameters
+    ----------
+    rho, n_sites, spacing, ward_block_px
+        As :func:`ward_sites_3d` (the block side only used by 'ward').
+    init : {'ward', 'random', 'density_random'}, optional
+        :func:`ward_sites_3d`, :func:`random_sites_3d` or :func:`density_random_sites_3d`.
+    seed : int, optional
+        Seed of the random initialisations (Ward's is deterministic).
+
+    Returns
+    -------
+    sites : (n_sites, 3) float64 ndarray
+        (x, y, z) physical.
+
+    Raises
+    ------
+    InputError, ParameterError
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> rho = np.ones((6, 7, 8))
+    >>> [initial_sites_3d(rho, 12, init=m).shape for m in INIT_METHODS]
+    [(12, 3), (12, 3), (12, 3)]
+    """
+    init = check("init", init)
+    if init == "ward":
+        return ward_sites_3d(rho, n_sites, spacing, ward_block_px=ward_block_px)
+    if init == "random":
+        return random_sites_3d(np.shape(rho), n_sites, spacing, seed=seed)
+    return density_random_sites_3d(rho, n_sites, spacing, seed=seed)

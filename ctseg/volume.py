@@ -7,22 +7,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._validate import as_image
-from .errors import CTSegError, InputError, ParameterError
+from ._validate import as_volume
+from .errors import CTSegError, ParameterError
 from .geometry import slice_axis, volume_slice
-from .intensity import gray_scale
-from .labelling import LEVEL_KEYS
-from .levels import material_levels
+from .levels import LEVEL_SAMPLE_VOXELS, volume_levels
 from .params import AUTO, resolve
 from .checkpoint import Checkpoint
 from .pipeline import segment_image
 from .raster import volume_labels  # noqa: F401  (transitional: callers move to ctseg.raster)
 from .resources import (LEVEL_BYTES_PER_VOXEL, RESULT_BYTES_PER_VOXEL, check_memory,
                         slice_bytes)
-
-LEVEL_SAMPLE_VOXELS = 1 << 25
-"""At most this many voxels (evenly spaced whole slices) measure the gray map and levels."""
-
 
 @dataclass
 class VolumeSegmentation:
@@ -60,37 +54,6 @@ def _segment_slice(image, params, extra, keep_maps=False):
         seg.cvt_labels = None
         seg.corrected_image = None
     return seg
-
-
-def _sample_slices(n_slices, slice_voxels):
-    """Evenly spaced slice indices whose voxels stay within LEVEL_SAMPLE_VOXELS."""
-    n_keep = max(1, min(n_slices, LEVEL_SAMPLE_VOXELS // max(slice_voxels, 1)))
-    return np.unique(np.linspace(0, n_slices - 1, n_keep).round().astype(int))
-
-
-def as_volume(volume, name="volume"):
-    """Return ``volume`` as a 3D numeric array (a 2D one as one slice), or raise InputError
-    saying what is wrong. NaN and infinite values are refused here, before any slice runs."""
-    try:
-        vol = np.asarray(volume)
-    except Exception as exc:
-        raise InputError(f"{name}: cannot be read as an array ({exc})") from None
-    if vol.ndim == 2:
-        vol = vol[None]
-    if vol.ndim != 3:
-        raise InputError(f"{name}: expected a 3D array (slices, rows, cols), got shape {vol.shape}")
-    if vol.size == 0:
-        raise InputError(f"{name}: the array is empty (shape {vol.shape})")
-    if vol.dtype == object or not (np.issubdtype(vol.dtype, np.number) or vol.dtype == bool) \
-            or np.iscomplexobj(vol):
-        raise InputError(f"{name}: expected real numbers, got dtype {vol.dtype}")
-    if np.issubdtype(vol.dtype, np.floating):
-        bad = ~np.isfinite(vol)
-        if bad.any():
-            k, r, c = np.argwhere(bad)[0]
-            raise InputError(f"{name}: {int(bad.sum())} voxel(s) are NaN or infinite (first in "
-                             f"slice {k}, row {r}, col {c})")
-    return vol
 
 
 def _run_local(tasks, n_jobs, on_done):
@@ -168,9 +131,8 @@ def segment_volume(volume, params=None, *, client=None, progress=None, keep_maps
     """Segment a 3D volume slice by slice into triangle meshes with one numbering of the
     materials for the whole volume.
 
-    The gray map onto 0-255 (:func:`ctseg.intensity.gray_scale`) and the material levels
-    (:func:`ctseg.levels.material_levels`) are measured once on the volume (on evenly
-    spaced whole slices, at most :data:`LEVEL_SAMPLE_VOXELS` voxels), then every slice is
+    The gray map onto 0-255 and the material levels are measured once on the volume
+    (:func:`ctseg.levels.volume_levels`), then every slice is
     segmented against them (:func:`ctseg.segment_image` with ``gray_scale`` and
     ``levels_255``): material k is the same material in every slice, whether or not a
     slice holds it. A volume of one slice is a 2D problem with the volume's numbering.
@@ -232,11 +194,7 @@ def segment_volume(volume, params=None, *, client=None, progress=None, keep_maps
     t_start = time.perf_counter()
 
     report(0.0, "gray levels")
-    sample = _sample_slices(n_slices, vol.size // n_slices)
-    stack = np.stack([as_image(volume_slice(vol, ax, k), name=f"slice {k}") for k in sample])
-    scale = gray_scale(stack, p.rescale_low_pct, p.rescale_high_pct)
-    levels, pixel_sigma = material_levels(stack, scale, **{k: getattr(p, k) for k in LEVEL_KEYS})
-    del stack
+    scale, levels, pixel_sigma, sample = volume_levels(vol, p, ax)
     slice_params = p.replace(n_materials=AUTO)  # fixed by the levels
     extra = dict(gray_scale=scale, levels_255=levels)
     t_levels = time.perf_counter() - t_start

@@ -1,9 +1,9 @@
 """VTK layer of ctseg: conversions between vtkImageData/vtkPolyData and numpy, readers,
 writers, and one VTK algorithm per stage. The algorithms live in :mod:`ctseg`; nothing here
-computes a segmentation."""
+computes a segmentation, and every filter parameter comes from :mod:`ctseg.params`."""
 from .convert import (ImageGeometry, image_to_array, array_to_image, mesh_to_polydata,
                       boundary_to_polydata, append_polydata, segmentation_to_polydata,
-                      polydata_to_arrays)
+                      polydata_to_arrays, attach_geometry, geometry_from_field_data)
 from .readers import read_image, SUPPORTED_INPUTS
 from .writers import write_mesh, write_polydata, read_polydata, MESH_FORMATS
 from .base import CTSegAlgorithm
@@ -14,12 +14,13 @@ from .triangulation import DelaunayMeshFilter
 from .triangle_gray import TriangleGrayFilter
 from .graphcut import GraphCutSegmentFilter
 from .boundary import MaterialBoundaryFilter
-from .segment import CTSegmentFilter
+from .segment import CTSegmentFilter, segment_array
 
 __all__ = ["ImageGeometry", "image_to_array", "array_to_image", "mesh_to_polydata",
            "boundary_to_polydata", "append_polydata", "segmentation_to_polydata",
-           "polydata_to_arrays", "read_image", "SUPPORTED_INPUTS", "write_mesh",
+           "polydata_to_arrays", "attach_geometry", "geometry_from_field_data", "read_image",
+           "SUPPORTED_INPUTS", "write_mesh",
            "write_polydata", "read_polydata", "MESH_FORMATS", "CTSegAlgorithm",
            "MetalStreakFilter", "DensityMapFilter", "CVTSitesFilter", "DelaunayMeshFilter",
            "TriangleGrayFilter", "GraphCutSegmentFilter", "MaterialBoundaryFilter",
-           "CTSegmentFilter"]
+           "CTSegmentFilter", "segment_array"]

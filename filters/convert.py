@@ -1,59 +1,45 @@
-"""numpy <-> VTK conversions that keep world geometry (origin, spacing, direction)."""
-from dataclasses import dataclass, field
+"""numpy <-> VTK conversions that keep world geometry (origin, spacing, direction).
 
+The geometry itself is :class:`ctseg.geometry.ImageGeometry` (no VTK); this module moves it
+onto and off vtkImageData and field data."""
 import numpy as np
 from vtkmodules.util import numpy_support
 from vtkmodules.vtkCommonCore import vtkPoints
 from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkImageData, vtkPolyData
 
 from ctseg.errors import InputError
+from ctseg.geometry import ImageGeometry, slice_to_volume_index
 
 
-@dataclass
-class ImageGeometry:
-    """Index-to-world mapping of an image: world = origin + direction @ (index * spacing)."""
+GEOMETRY_FIELD = "ctseg_geometry"
+"""Name of the field-data array that carries an image's geometry downstream."""
 
-    origin: tuple = (0.0, 0.0, 0.0)
-    spacing: tuple = (1.0, 1.0, 1.0)
-    direction: np.ndarray = field(default_factory=lambda: np.eye(3))
 
-    def __post_init__(self):
-        self.origin = tuple(float(v) for v in self.origin)
-        self.spacing = tuple(float(v) for v in self.spacing)
-        self.direction = np.asarray(self.direction, float).reshape(3, 3)
-        if len(self.origin) != 3 or len(self.spacing) != 3:
-            raise InputError("geometry: origin and spacing need 3 values each")
-        if not all(np.isfinite(self.spacing)) or min(self.spacing) <= 0:
-            raise InputError(f"geometry: spacing must be finite and > 0, got {self.spacing}")
+def attach_geometry(data, geometry, shape):
+    """Record ``geometry`` and the (rows, cols) ``shape`` of its slice in ``data``'s field
+    data, so that a filter downstream (Delaunay on CVT sites) can work in index
+    coordinates."""
+    values = np.concatenate([geometry.origin, geometry.spacing, geometry.direction.ravel(),
+                             shape])
+    arr = numpy_support.numpy_to_vtk(values.astype(np.float64), deep=True)
+    arr.SetName(GEOMETRY_FIELD)
+    data.GetFieldData().AddArray(arr)
 
-    def to_world(self, ijk):
-        ijk = np.asarray(ijk, float)
-        return np.asarray(self.origin) + (ijk * np.asarray(self.spacing)) @ self.direction.T
 
-    def to_index(self, xyz):
-        """World coordinates -> (fractional) index coordinates (i, j, k)."""
-        xyz = np.asarray(xyz, float) - np.asarray(self.origin)
-        return np.linalg.solve(self.direction, xyz.T).T / np.asarray(self.spacing)
+def geometry_from_field_data(data):
+    """(ImageGeometry, (rows, cols)) recorded by :func:`attach_geometry`.
 
-    FIELD = "ctseg_geometry"
-
-    def attach(self, data, shape):
-        """Record the geometry and the (rows, cols) of the slice in ``data``'s field data, so
-        that a filter downstream (Delaunay on CVT sites) can work in index coordinates."""
-        values = np.concatenate([self.origin, self.spacing, self.direction.ravel(), shape])
-        arr = numpy_support.numpy_to_vtk(values.astype(np.float64), deep=True)
-        arr.SetName(self.FIELD)
-        data.GetFieldData().AddArray(arr)
-
-    @classmethod
-    def from_field_data(cls, data):
-        """(ImageGeometry, (rows, cols)) recorded by :meth:`attach`."""
-        arr = data.GetFieldData().GetArray(cls.FIELD)
-        if arr is None:
-            raise InputError("polydata: no image geometry recorded (the input must come "
-                             "from a ctseg filter such as CVTSitesFilter)")
-        v = numpy_support.vtk_to_numpy(arr)
-        return cls(v[0:3], v[3:6], v[6:15].reshape(3, 3)), (int(v[15]), int(v[16]))
+    Raises
+    ------
+    InputError
+        ``data`` carries no recorded geometry.
+    """
+    arr = data.GetFieldData().GetArray(GEOMETRY_FIELD)
+    if arr is None:
+        raise InputError("polydata: no image geometry recorded (the input must come "
+                         "from a ctseg filter such as CVTSitesFilter)")
+    v = numpy_support.vtk_to_numpy(arr)
+    return ImageGeometry(v[0:3], v[3:6], v[6:15].reshape(3, 3)), (int(v[15]), int(v[16]))
 
 
 def image_to_array(image):
@@ -80,12 +66,39 @@ def image_to_array(image):
     return arr.copy(), ImageGeometry(image.GetOrigin(), image.GetSpacing(), direction)
 
 
-def array_to_image(array, geometry=None, name="scalars"):
-    """(rows, cols) or (nz, rows, cols) array -> vtkImageData with the given geometry."""
+def array_to_image(array, geometry=None, name="scalars", components=1):
+    """A numpy array -> vtkImageData with the given geometry: the one way ctseg builds
+    an image.
+
+    Parameters
+    ----------
+    array : array_like
+        (rows, cols) or (nz, rows, cols); with ``components > 1`` one more trailing axis of
+        that length (e.g. (rows, cols, 3) for RGB). Row j is VTK's j, slice k VTK's k.
+    geometry : ImageGeometry, optional
+        Origin, spacing and direction (default: the identity geometry).
+    name : str
+        Name of the point scalars.
+    components : int
+        Values per pixel.
+
+    Returns
+    -------
+    vtkImageData
+
+    Raises
+    ------
+    InputError
+        An array of another shape.
+    """
     arr = np.ascontiguousarray(array)
-    if arr.ndim == 2:
+    spatial = arr.ndim - (1 if components > 1 else 0)
+    if components > 1 and (arr.ndim < 3 or arr.shape[-1] != components):
+        raise InputError(f"image: expected a trailing axis of {components} components, got "
+                         f"shape {arr.shape}")
+    if spatial == 2:
         arr = arr[None]
-    if arr.ndim != 3:
+    if arr.ndim - (1 if components > 1 else 0) != 3:
         raise InputError(f"image: expected a 2D or 3D array, got shape {arr.shape}")
     geometry = geometry or ImageGeometry()
     img = vtkImageData()
@@ -94,10 +107,25 @@ def array_to_image(array, geometry=None, name="scalars"):
     img.SetSpacing(geometry.spacing)
     if hasattr(img, "SetDirectionMatrix"):
         img.SetDirectionMatrix(geometry.direction.ravel().tolist())
-    vtk_arr = numpy_support.numpy_to_vtk(arr.ravel(), deep=True)
+    flat = arr.reshape(-1, components) if components > 1 else arr.ravel()
+    vtk_arr = numpy_support.numpy_to_vtk(flat, deep=True)
     vtk_arr.SetName(name)
     img.GetPointData().SetScalars(vtk_arr)
     return img
+
+
+def _field_array(data, name, values):
+    """Add ``values`` (a number or a 1D array) to ``data``'s field data as ``name``."""
+    arr = numpy_support.numpy_to_vtk(np.atleast_1d(np.asarray(values, np.float64)), deep=True)
+    arr.SetName(name)
+    data.GetFieldData().AddArray(arr)
+
+
+def _point_array(values, name):
+    """A named VTK array of per-pixel values (ravelled in VTK's point order)."""
+    arr = numpy_support.numpy_to_vtk(np.ascontiguousarray(values).ravel(), deep=True)
+    arr.SetName(name)
+    return arr
 
 
 def _points(xyz):
@@ -124,17 +152,16 @@ def _add_cell_array(poly, values, name, vtk_type=None):
 
 
 def _world_points(points, geometry, axis, slice_index):
-    from ctseg.volume import slice_to_volume_index
-
     return geometry.to_world(slice_to_volume_index(points, axis, slice_index))
 
 
-def mesh_to_polydata(points, triangles, material, gray, geometry=None, slice_index=0, axis="z"):
+def mesh_to_polydata(points, triangles, material, gray, geometry=None, slice_index=0, axis=0):
     """Triangle mesh of one slice, in its pixel-index coordinates -> vtkPolyData in world
     coordinates.
 
-    The slice is number ``slice_index`` along ``axis`` of the image the geometry belongs to
-    (see :func:`ctseg.volume.volume_slice` for the orientation of each axis); a 2D image is
+    The slice is number ``slice_index`` along ``axis`` ('z', 'y', 'x', or the numpy axis
+    0, 1, 2; default 0, z) of the image the geometry belongs to (see
+    :func:`ctseg.geometry.volume_slice` for the orientation of each axis); a 2D image is
     slice 0 along z. Cell arrays: ``material`` (int32), ``gray`` (float64, input units),
     ``slice`` (int32).
     """
@@ -149,7 +176,7 @@ def mesh_to_polydata(points, triangles, material, gray, geometry=None, slice_ind
     return poly
 
 
-def boundary_to_polydata(points, lines, sides, geometry=None, slice_index=0, axis="z"):
+def boundary_to_polydata(points, lines, sides, geometry=None, slice_index=0, axis=0):
     """Boundary polylines (lists of vertex indices) of one slice, in its pixel-index
     coordinates -> vtkPolyData with lines in world coordinates (see
     :func:`boundary_lines_to_polydata`)."""
@@ -218,7 +245,7 @@ def segmentation_to_polydata(result, geometry=None):
     """A :class:`ctseg.SegmentedMesh` (2D image) or :class:`ctseg.volume.VolumeSegmentation`
     -> (mesh vtkPolyData, boundary vtkPolyData), all slices in one of each."""
     slices = getattr(result, "slices", None)
-    axis = "zyx"[result.axis] if slices is not None else "z"
+    axis = result.axis if slices is not None else 0  # numpy axis; a 2D image is along z
     slices = slices if slices is not None else [result]
     meshes, bounds = [], []
     for k, seg in enumerate(slices):

@@ -7,11 +7,10 @@ import os
 import numpy as np
 from vtkmodules.util import numpy_support
 from vtkmodules.vtkCommonCore import vtkLookupTable
-from vtkmodules.vtkCommonDataModel import vtkImageData
 
 from ctseg.errors import InputError
 
-from .convert import _add_cell_array, _cells, _points
+from .convert import _add_cell_array, _cells, _points, array_to_image
 from .writers import PALETTE, atomic_outputs, check_output_path
 
 PANEL_PX = 420
@@ -23,10 +22,7 @@ def _image_actor(values, lut_range=None, lut=None):
     from vtkmodules.vtkImagingCore import vtkImageMapToColors
     from vtkmodules.vtkRenderingCore import vtkImageActor
 
-    arr = np.ascontiguousarray(values, dtype=np.float64)
-    img = vtkImageData()
-    img.SetDimensions(arr.shape[1], arr.shape[0], 1)
-    img.GetPointData().SetScalars(numpy_support.numpy_to_vtk(arr.ravel(), deep=True))
+    img = array_to_image(np.asarray(values, dtype=np.float64))
     if lut is None:
         lo, hi = lut_range
         lut = vtkLookupTable()
@@ -98,8 +94,12 @@ def _palette_lut(n):
     return lut
 
 
-def _region_lut(n, seed=0):
-    rng = np.random.default_rng(seed)
+REGION_COLOUR_SEED = 0
+"""Seed of the random colours of the CVT regions (the same colours in every figure)."""
+
+
+def _region_lut(n):
+    rng = np.random.default_rng(REGION_COLOUR_SEED)
     lut = vtkLookupTable()
     lut.SetNumberOfTableValues(n)
     for k, (r, g, b) in enumerate(rng.uniform(0.35, 1.0, (n, 3))):

@@ -1,49 +1,47 @@
 """The metal streak correction as a VTK filter: vtkImageData -> the corrected vtkImageData."""
-from vtkmodules.util import numpy_support
 from vtkmodules.vtkCommonDataModel import vtkImageData
 
-from ctseg.pipeline import correct_streaks
+from ctseg.beam_hardening import correct_streaks
 
-from .base import CTSegAlgorithm, parameter
+from .base import CTSegAlgorithm, spec_names
+from .convert import _field_array, _point_array
 
 
 class MetalStreakFilter(CTSegAlgorithm):
     """Remove the beam-hardening streaks of the densest material from a one-slice image
-    (:func:`ctseg.pipeline.correct_streaks`, the first stage of :func:`ctseg.segment_image`).
+    (:func:`ctseg.beam_hardening.correct_streaks`, the first stage of
+    :func:`ctseg.segment_image`).
 
     Output: the image with the corrected values as its point scalars (named as the input's,
     float64), the input's values kept as an ``original`` point array, and field data
     ``streak_weight``, ``streak_explained`` (share of within-material variance removed)
     and ``streak_max_change`` (0 when nothing was corrected). Connect the output where the
     later stages (density map, triangle gray, graph cut) take the image.
-    Parameter: Sigma (px, 1; the smoothing before pixels are classified).
+    Parameters: what ``correct_streaks`` reads (``ctseg params``): the levels group
+    (which tells the materials apart), DensityFloor and DensitySaturation (which find the
+    flat pixels), StreakSigma, StreakMargin, StreakRounds, StreakMinExplained.
     """
+
+    PARAMETERS = spec_names("levels", names=(
+        "density_floor", "density_saturation", "streak_sigma_px", "streak_margin_px",
+        "streak_rounds", "streak_min_explained"))
 
     def __init__(self):
         super().__init__(input_type="vtkImageData", output_type="vtkImageData")
-        self._sigma = 1.0
-
-    SetSigma, GetSigma = parameter("_sigma", float, "Gaussian smoothing before classifying, px")
 
     def _request(self, request, in_info, out_info):
         arr, _, image = self._input_slice(in_info)
         self.UpdateProgress(0.0)
-        fix = correct_streaks(arr, sigma=self._sigma)
+        fix = correct_streaks(arr, self.params)
         out = vtkImageData.GetData(out_info, 0)
         out.ShallowCopy(image)
         scalars = image.GetPointData().GetScalars()
-        corrected = numpy_support.numpy_to_vtk(fix.image.ravel(), deep=True)
-        corrected.SetName(scalars.GetName() or "scalars")
-        original = numpy_support.numpy_to_vtk(arr.ravel(), deep=True)
-        original.SetName("original")
         pd = out.GetPointData()
         if scalars.GetName():
             pd.RemoveArray(scalars.GetName())
-        pd.AddArray(original)
-        pd.SetScalars(corrected)
+        pd.AddArray(_point_array(arr, "original"))
+        pd.SetScalars(_point_array(fix.image, scalars.GetName() or "scalars"))
         for name, value in (("streak_weight", fix.weight), ("streak_explained", fix.explained),
                             ("streak_max_change", fix.max_change)):
-            a = numpy_support.numpy_to_vtk([float(value)], deep=True)
-            a.SetName(name)
-            out.GetFieldData().AddArray(a)
+            _field_array(out, name, float(value))
         self.UpdateProgress(1.0)

@@ -4,7 +4,7 @@ import numpy as np
 from ctseg.triangulation import delaunay_mesh
 
 from .base import CTSegAlgorithm
-from .convert import ImageGeometry, _cells, _points
+from .convert import _cells, _points, attach_geometry, geometry_from_field_data
 
 
 class DelaunayMeshFilter(CTSegAlgorithm):
@@ -21,11 +21,11 @@ class DelaunayMeshFilter(CTSegAlgorithm):
 
     def _request(self, request, in_info, out_info):
         sites = self._input(in_info)
-        geom, shape = ImageGeometry.from_field_data(sites)
+        geom, shape = geometry_from_field_data(sites)
         pts = np.array([sites.GetPoint(k) for k in range(sites.GetNumberOfPoints())])
         mesh = delaunay_mesh(geom.to_index(pts)[:, :2])
         out = self._output_poly(out_info)
         out.SetPoints(_points(geom.to_world(np.column_stack([mesh.points, np.zeros(len(pts))]))))
         out.SetPolys(_cells(mesh.triangles.ravel(), 3))
-        geom.attach(out, shape)
+        attach_geometry(out, geom, shape)
         self.UpdateProgress(1.0)

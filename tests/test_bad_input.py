@@ -9,7 +9,7 @@ import pytest
 
 from ctseg.cli import main
 from ctseg.filters import array_to_image
-from ctseg.filters.convert import ImageGeometry
+from ctseg.geometry import ImageGeometry
 
 from file_writers import write_ct_dicom
 
@@ -116,15 +116,11 @@ def test_valid_results(tmp_path, capsys, name, array, n_materials):
     import json
 
     if name == "rgb_png":  # colour pictures are converted to luminance, not refused
-        from vtkmodules.util import numpy_support
-        from vtkmodules.vtkCommonDataModel import vtkImageData
         from vtkmodules.vtkIOImage import vtkPNGWriter
 
         rgb = np.zeros((24, 24, 3), np.uint8)
         rgb[_disc(24) > 100] = (200, 60, 10)
-        img = vtkImageData()
-        img.SetDimensions(24, 24, 1)
-        img.GetPointData().SetScalars(numpy_support.numpy_to_vtk(rgb.reshape(-1, 3), deep=True))
+        img = array_to_image(rgb, components=3)
         _vtk_write(vtkPNGWriter, tmp_path / "in.png", img)
         src = tmp_path / "in.png"
     else:

@@ -92,7 +92,9 @@ def test_materials_option(slice_files):
     (["missing.npy", "-o", "m.vtp"], "no such file"),
     (["slice.npy", "-o", "m.abc"], "unknown output format"),
     (["slice.npy", "-o", "m.vtp", "--figure", "f.jpg"], "unknown output format"),
-    (["slice.npy", "-o", "m.vtp", "--materials", "0"], "n_materials"),
+    (["slice.npy", "-o", "m.vtp", "--materials", "-2"], "n_materials"),
+    (["slice.npy", "-o", "m.vtp", "--set", "lamda=3"], "did you mean 'lam'"),
+    (["slice.npy", "-o", "m.vtp", "--params", "missing.json"], "--params"),
     (["slice.npy", "-o", "m.vtp", "--sites", "2"], "n_sites"),
     (["slice.npy", "-o", "m.vtp", "--sites", "99999"], "n_sites"),
     (["slice.npy", "-o", "nowhere/m.vtp"], "does not exist"),
@@ -108,7 +110,27 @@ def test_errors_are_one_line_and_exit_2(slice_files, capsys, monkeypatch, args, 
 
 def test_console_script_help():
     out = subprocess.run([sys.executable, "-m", "ctseg.cli", "mesh", "--help"], capture_output=True, text=True)
-    assert out.returncode == 0 and "one per 128 pixels" in out.stdout
+    assert out.returncode == 0 and "--set NAME=VALUE" in out.stdout and "n_sites" in out.stdout
+
+
+def test_params_lists_every_parameter_and_round_trips(slice_files, capsys, monkeypatch):
+    """`ctseg params` names every spec parameter; a report's parameters, given back with
+    --params, reproduce the run; --set and the named options override them."""
+    from ctseg.params import SPECS, SegmentParams
+
+    assert main(["params"]) == 0
+    table = capsys.readouterr().out
+    assert all(name in table for name in SPECS)
+    assert main(["params", "--json"]) == 0
+    assert SegmentParams.from_dict(json.loads(capsys.readouterr().out)) == SegmentParams()
+    monkeypatch.chdir(slice_files)
+    assert main(["mesh", "slice.npy", "-o", "a.vtp", "--sites", "60", "--set", "lam=50",
+                 "--set", "init=random", "--report", "a.json", "-q"]) == 0
+    used = json.loads((slice_files / "a.json").read_text())["parameters"]
+    assert used["graphcut"]["lam"] == 50.0 and used["sites"]["init"] == "random"
+    assert used["sites"]["n_sites"] == 60
+    assert main(["mesh", "slice.npy", "-o", "b.vtp", "--params", "a.json", "-q"]) == 0
+    assert (slice_files / "a.vtp").read_bytes() == (slice_files / "b.vtp").read_bytes()
 
 
 def test_volume_from_nrrd_to_ply_with_truth(tmp_path, capsys):
@@ -147,11 +169,11 @@ def test_interrupt_leaves_no_partial_output_and_resume_finishes(tmp_path, monkey
     calls = []
     real = ctseg.volume._segment_slice
 
-    def interrupted(image, params, keep_maps=False):
+    def interrupted(image, params, extra, keep_maps=False):
         calls.append(1)
         if len(calls) == 3:
             raise KeyboardInterrupt
-        return real(image, params, keep_maps)
+        return real(image, params, extra, keep_maps)
 
     vol = make_volume(4, 48, seed=1).image
     np.save(tmp_path / "v.npy", vol)

@@ -4,225 +4,152 @@
 Load it with Tools > Manage Plugins > Load New... (this file), or put this folder on
 PV_PLUGIN_PATH. ParaView's Python must be able to import ctseg and its dependencies (see
 the README's ParaView section). This file only declares the ParaView proxies: every filter
-is a ``ctseg.filters`` class, unchanged; the algorithms live in ``ctseg``. In
-``paraview.simple`` the filters are CTSegment, CTMetalStreaks, CTDensityMap, CTCVTSites, CTDelaunayMesh,
-CTTriangleGray, CTGraphCut and CTMaterialBoundary.
+is a ``ctseg.filters`` class, and every property is generated from the parameter spec
+(:mod:`ctseg.params`): its name (``Param.vtk``), default, range or choices, and
+documentation. A parameter that may be derived from the data takes 0 for "automatic"; a
+choice is an index into its choices. In ``paraview.simple`` the filters are CTSegment,
+CTMetalStreaks, CTDensityMap, CTCVTSites, CTDelaunayMesh, CTTriangleGray, CTGraphCut and
+CTMaterialBoundary.
 """
+from xml.sax.saxutils import escape, quoteattr
+
 from paraview.util.vtkAlgorithm import smdomain, smhint, smproperty, smproxy
 
+from ctseg.params import AUTO_NUMBER, SPECS
 from ctseg.filters import (CTSegmentFilter, CVTSitesFilter, DelaunayMeshFilter,
                            DensityMapFilter, GraphCutSegmentFilter, MaterialBoundaryFilter,
                            MetalStreakFilter, TriangleGrayFilter)
 
 MENU = '<ShowInMenu category="ctseg"/>'
-AXES = ("z", "y", "x")
-INITS = ("ward", "random", "density_random")
+GROUP_LABELS = {"density": "Density map", "sites": "Initial sites", "cvt": "CVT (Lloyd)",
+                "levels": "Material levels", "graphcut": "Graph cut",
+                "recursion": "Recursive cut", "corrections": "Corrections",
+                "volume": "Volume"}
+GROUPED_OVER = 8
+"""Proxies with more properties than this show them in groups, by stage."""
 
 
-def _doc(text):
-    return smdomain.xml(f"<Documentation>{text}</Documentation>")
+def documentation(spec):
+    """The property's documentation: the spec's meaning, unit and what 0 means."""
+    text = spec.doc[:1].upper() + spec.doc[1:]
+    if spec.unit:
+        text += f" ({spec.unit})"
+    if spec.auto:
+        text += f"; {AUTO_NUMBER} = automatic"
+    return text + "."
 
 
-def _enum(names):
-    entries = "".join(f'<Entry value="{k}" text="{n}"/>' for k, n in enumerate(names))
-    return smdomain.xml(f'<EnumerationDomain name="enum">{entries}</EnumerationDomain>')
+def number_range(spec):
+    """(min, max) of a number property: the spec's bounds, with the AUTO number admitted
+    where the parameter may be automatic."""
+    low = spec.low
+    if spec.auto:
+        low = min(low, AUTO_NUMBER)
+    return low, spec.high
 
 
-def _number(kind, name, default, low, high, doc, apply):
-    """An int or float property with a range, calling ``apply(self, value)``."""
-    vector, domain = ((smproperty.intvector, smdomain.intrange) if kind is int
-                      else (smproperty.doublevector, smdomain.doublerange))
+def _enumeration(choices):
+    entries = "".join(f"<Entry value=\"{k}\" text={quoteattr(str(c))}/>"
+                      for k, c in enumerate(choices))
+    return f'<EnumerationDomain name="enum">{entries}</EnumerationDomain>'
 
-    @vector(name=name, command=f"Set{name}", default_values=[default])
-    @domain(min=low, max=high)
-    @_doc(doc)
+
+def _property(base, name):
+    """The ParaView setter of spec parameter ``name``: the base filter's Set<Vtk> (which
+    takes VTK numbers), decorated with the property, its domain and documentation."""
+    spec = SPECS[name]
+    base_setter = getattr(base, f"Set{spec.vtk}")
+
     def setter(self, value):
-        apply(self, kind(value))
-    return setter
+        base_setter(self, value)
+
+    setter.__name__ = setter.__qualname__ = f"Set{spec.vtk}"
+    setter.__doc__ = base_setter.__doc__
+    default = [spec.to_number(spec.default)]
+    func = smdomain.xml(f"<Documentation>{escape(documentation(spec))}</Documentation>")(setter)
+    if spec.kind == "float":
+        low, high = number_range(spec)
+        func = smdomain.doublerange(min=low, max=high)(func)
+        vector = smproperty.doublevector
+    else:
+        if spec.kind == "choice":
+            func = smdomain.xml(_enumeration(spec.choices))(func)
+        elif spec.kind == "bool":
+            func = smdomain.xml('<BooleanDomain name="bool"/>')(func)
+        else:
+            low, high = number_range(spec)
+            func = smdomain.intrange(min=int(low), max=int(high))(func)
+        vector = smproperty.intvector
+    return vector(name=spec.vtk, command=f"Set{spec.vtk}", number_of_elements=1,
+                  default_values=default)(func)
 
 
-def _int(*args):
-    return _number(int, *args)
+def _groups(names):
+    """PropertyGroup declarations that show the properties by stage, in the spec's order."""
+    out = []
+    for group in dict.fromkeys(SPECS[n].group for n in names):
+        members = [SPECS[n].vtk for n in names if SPECS[n].group == group]
+        props = "".join(f'<Property name="{m}"/>' for m in members)
+        label = quoteattr(GROUP_LABELS.get(group, group.capitalize()))
+        out.append(f"<PropertyGroup label={label}>{props}</PropertyGroup>")
+    return out
 
 
-def _double(*args):
-    return _number(float, *args)
+def proxy(base, name, label, doc, inputs=(("Input", 0, "vtkImageData"),), outputs=()):
+    """A ParaView filter proxy over ctseg filter class ``base``: its spec parameters as
+    properties, its inputs as (port name, port index, data type) in port order, its
+    output ports as (name, index), in the ctseg menu."""
+    namespace = {"__module__": __name__, "__doc__": doc}
+    for pname in base.PARAMETERS:
+        setter = _property(base, pname)
+        namespace[setter.__name__] = setter
+    if len(base.PARAMETERS) > GROUPED_OVER:
+        # ParaView writes the methods' declarations sorted by attribute name: this one
+        # sorts after every Set..., so the groups follow the properties they name
+        def property_groups(self):
+            """Carries the PropertyGroup declarations; never called."""
+
+        namespace["_property_groups"] = smproperty.xml("".join(_groups(base.PARAMETERS)))(
+            property_groups)
+    cls = type(name, (base,), namespace)
+    for port_name, index in outputs:
+        cls = smproperty.xml(f'<OutputPort name="{port_name}" index="{index}"/>')(cls)
+    for port_name, index, data_type in inputs:
+        cls = smdomain.datatype(dataTypes=[data_type], composite_data_supported=False)(cls)
+        cls = smproperty.input(name=port_name, port_index=index)(cls)
+    return smproxy.filter(name=name, label=label)(smhint.xml(MENU)(cls))
 
 
-def _choice(name, names, default, doc, apply):
-    @smproperty.intvector(name=name, command=f"Set{name}", default_values=[default])
-    @_enum(names)
-    @_doc(doc)
-    def setter(self, value):
-        apply(self, names[int(value)])
-    return setter
+MESH_AND_IMAGE = (("Mesh", 0, "vtkPolyData"), ("Image", 1, "vtkImageData"))
 
-
-def _param(key, auto_zero=False):
-    """Apply to a keyword of ctseg.segment_image; 0 means 'from the data' where it may."""
-    def apply(self, value):
-        self.SetParameter(key, None if auto_zero and value == 0 else value)
-    return apply
-
-
-def _stage(name, label, *inputs):
-    """Declare a stage filter: its proxy, the ctseg menu, and its inputs as
-    (port name, port index, data type), in port order."""
-    def decorate(cls):
-        for port, index, data_type in inputs:
-            cls = smdomain.datatype(dataTypes=[data_type], composite_data_supported=False)(cls)
-            cls = smproperty.input(name=port, port_index=index)(cls)
-        return smproxy.filter(name=name, label=label)(smhint.xml(MENU)(cls))
-    return decorate
-
-
-@smproxy.filter(name="CTSegment", label="CT Segment")
-@smhint.xml(MENU)
-@smproperty.xml('<OutputPort name="Mesh" index="0"/>')
-@smproperty.xml('<OutputPort name="Boundaries" index="1"/>')
-@smproperty.input(name="Input", port_index=0)
-@smdomain.datatype(dataTypes=["vtkImageData"], composite_data_supported=False)
-class CTSegment(CTSegmentFilter):
-    """CT slice or volume -> triangle mesh with one material per triangle
-    (Yang et al. 2014); volumes slice by slice with one material numbering."""
-
-    SetNumberOfSites = _int("NumberOfSites", 0, 0, 1000000,
-                            "CVT sites (mesh vertices) per slice; 0 = one per 128 pixels.",
-                            CTSegmentFilter.SetNumberOfSites)
-    SetSeed = _int("Seed", 0, 0, 2 ** 31 - 1, "Seed of the random initialisations.",
-                   CTSegmentFilter.SetSeed)
-    SetNumberOfMaterials = _int("NumberOfMaterials", 0, 0, 32,
-                                "Exact number of materials; 0 = found from the data.",
-                                CTSegmentFilter.SetNumberOfMaterials)
-    SetSliceAxis = _choice("SliceAxis", AXES, 0, "Axis along which a volume is sliced.",
-                           CTSegmentFilter.SetSliceAxis)
-    SetNumberOfJobs = _int("NumberOfJobs", 1, 0, 256,
-                           "Worker processes for a volume's slices (1 = in ParaView's "
-                           "process, 0 = one per core).", CTSegmentFilter.SetNumberOfJobs)
-    SetInitialization = _choice("Initialization", INITS, 0,
-                                "Initial CVT sites: Ward's clustering (the paper), uniform "
-                                "random, or random by density.", _param("init"))
-    SetSigma = _double("Sigma", 1.0, 0.0, 10.0, "Gaussian pre-smoothing of the density "
-                       "map, pixels.", _param("sigma"))
-    SetDensityFloor = _double("DensityFloor", 0.02, 1e-6, 1.0, "Density added everywhere "
-                              "so that flat regions keep sites.", _param("density_floor"))
-    SetDensitySaturation = _double("DensitySaturation", 0.0, 0.0, 1.0,
-                                   "Gradient that gets the full density, as a fraction of "
-                                   "the largest; 0 = from the noise (auto), 1 = the paper's "
-                                   "normalisation.",
-                                   lambda self, v: self.SetParameter("density_saturation",
-                                                                     "auto" if v == 0 else v))
-    SetDensityRidge = _double("DensityRidge", 2.0, 0.0, 8.0, "Ridge sharpening exponent "
-                              "(0 = the paper's map).", _param("density_ridge"))
-    SetWardBlockPixels = _int("WardBlockPixels", 0, 0, 64, "Ward pre-merge block size in pixels "
-                        "(0 = automatic, 1 = exact Ward).", _param("ward_block_px", True))
-    SetTolerance = _double("Tolerance", 0.01, 1e-6, 10.0, "Lloyd stops when no site moves "
-                           "more than this, pixels.", _param("tol_px"))
-    SetMaximumIterations = _int("MaximumIterations", 200, 1, 100000, "Lloyd iteration cap.",
-                                _param("max_iter"))
-    SetLambda = _double("Lambda", 70.0, 0.0, 1e6, "Weight of the neighbour terms of the "
-                        "graph cut (paper: 70).", _param("lam"))
-    SetBeta = _double("Beta", 0.286, 0.0, 100.0, "Weight of the distance term of the "
-                      "neighbour capacities (paper: 0.286).", _param("beta"))
-    SetTheta = _double("Theta", 0.0, 0.0, 255.0, "Seed-set width of the graph cut, gray "
-                       "levels on 0-255; 0 = 10% of the component's range.",
-                       _param("theta", True))
-    SetStepThreshold = _double("StepThreshold", 0.0, 0.0, 255.0, "Gray step (0-255) above "
-                               "which a triangle straddles a boundary; 0 = from the noise.",
-                               _param("step_threshold", True))
-    SetMergeK = _double("MergeK", 5.0, 0.0, 100.0, "Materials closer than MergeK noise "
-                        "sigmas (+ MergeRel x gray) are one.", _param("merge_k"))
-    SetMergeRel = _double("MergeRel", 0.2, 0.0, 10.0, "Gray-proportional part of the "
-                          "material separation (beam hardening).", _param("merge_rel"))
-    SetMergeFloor = _double("MergeFloor", 2.0, 0.0, 255.0, "Smallest material separation, "
-                            "gray levels on 0-255.", _param("merge_floor"))
-    SetMergeThreshold = _double("MergeThreshold", 0.0, 0.0, 255.0, "Fixed material "
-                                "separation (0-255) instead of the rule above; 0 = off.",
-                                _param("merge_threshold", True))
-    SetMinTriangles = _int("MinTriangles", 2, 1, 1000000, "Components smaller than this "
-                           "are not split further.", _param("min_triangles"))
-    SetMaxDepth = _int("MaxDepth", 32, 0, 1000, "Recursion depth cap of the graph cuts.",
-                       _param("max_depth"))
-    SetMinMaterialArea = _double("MinMaterialArea", 0.0, 0.0, 1e12, "Interior area (px) a "
-                                 "gray mode needs to be a material; 0 = automatic.",
-                                 _param("min_material_area", True))
-    SetMinPocketArea = _double("MinPocketArea", 4.0, 0.0, 1e12, "Interior area (px) of a "
-                               "material that makes a component worth splitting.",
-                               _param("min_pocket_area"))
-    SetWeightByEdgeLength = _int("WeightByEdgeLength", 0, 0, 1, "Multiply neighbour "
-                                 "capacities by the shared edge length (not the paper's).",
-                                 lambda self, v: self.SetParameter("weight_by_edge_length", bool(v)))
-    SetStreakCorrection = _int("StreakCorrection", 1, 0, 1, "First remove the dark "
-                               "beam-hardening streaks next to metal (not the paper's).",
-                               lambda self, v: self.SetParameter("streak_correction", bool(v)))
-    SetBlurCorrection = _int("BlurCorrection", 1, 0, 1, "Take off the edge blur the first "
-                             "labelling predicts and label again (not the paper's).",
-                             lambda self, v: self.SetParameter("blur_correction", bool(v)))
-
-
-@_stage("CTMetalStreaks", "CT Metal Streaks", ("Input", 0, "vtkImageData"))
-class CTMetalStreaks(MetalStreakFilter):
-    """First stage (not in the paper): the slice with the beam-hardening streaks of its
-    densest material removed; the input values kept as an 'original' point array."""
-
-    SetSigma = _double("Sigma", 1.0, 0.0, 10.0, "Gaussian smoothing before pixels are "
-                       "classified, pixels.", MetalStreakFilter.SetSigma)
-
-
-@_stage("CTDensityMap", "CT Density Map", ("Input", 0, "vtkImageData"))
-class CTDensityMap(DensityMapFilter):
-    """Stage 1: the gradient density map of a slice, as a 'density' point array."""
-
-    SetSigma = _double("Sigma", 1.0, 0.0, 10.0, "Gaussian pre-smoothing, pixels.",
-                       DensityMapFilter.SetSigma)
-    SetFloor = _double("Floor", 0.02, 1e-6, 1.0, "Density added everywhere.",
-                       DensityMapFilter.SetFloor)
-    SetSaturation = _double("Saturation", 0.0, 0.0, 1.0, "Fraction of the largest gradient "
-                            "that gets the full density; 0 = from the noise (auto).",
-                            lambda self, v: DensityMapFilter.SetSaturation(
-                                self, "auto" if v == 0 else v))
-    SetRidge = _double("Ridge", 2.0, 0.0, 8.0, "Ridge sharpening exponent (0 = off).",
-                       DensityMapFilter.SetRidge)
-
-
-@_stage("CTCVTSites", "CT CVT Sites", ("Input", 0, "vtkImageData"))
-class CTCVTSites(CVTSitesFilter):
-    """Stages 2-3: Ward-initialised CVT of a density map; the sites as vertices."""
-
-    SetNumberOfSites = _int("NumberOfSites", 0, 0, 1000000, "0 = one per 128 pixels.",
-                            CVTSitesFilter.SetNumberOfSites)
-    SetSeed = _int("Seed", 0, 0, 2 ** 31 - 1, "Seed of the random initialisations.",
-                   CVTSitesFilter.SetSeed)
-    SetInitialization = _choice("Initialization", INITS, 0, "Initial sites.",
-                                CVTSitesFilter.SetInitialization)
-    SetTolerance = _double("Tolerance", 0.01, 1e-6, 10.0, "Lloyd stopping move, pixels.",
-                           CVTSitesFilter.SetTolerance)
-    SetMaximumIterations = _int("MaximumIterations", 200, 1, 100000, "Lloyd iteration cap.",
-                                CVTSitesFilter.SetMaximumIterations)
-
-
-@_stage("CTDelaunayMesh", "CT Delaunay Mesh", ("Input", 0, "vtkPolyData"))
-class CTDelaunayMesh(DelaunayMeshFilter):
-    """Stage 4: the Delaunay triangles of the CVT sites."""
-
-
-@_stage("CTTriangleGray", "CT Triangle Gray", ("Mesh", 0, "vtkPolyData"), ("Image", 1, "vtkImageData"))
-class CTTriangleGray(TriangleGrayFilter):
-    """Stage 5: exact area-weighted mean gray of every triangle over the image."""
-
-
-@_stage("CTGraphCut", "CT Graph Cut", ("Mesh", 0, "vtkPolyData"), ("Image", 1, "vtkImageData"))
-class CTGraphCut(GraphCutSegmentFilter):
-    """Stages 6-7: recursive graph cut of the triangles into materials."""
-
-    SetNumberOfMaterials = _int("NumberOfMaterials", 0, 0, 32, "0 = found from the data.",
-                                GraphCutSegmentFilter.SetNumberOfMaterials)
-    SetLambda = _double("Lambda", 70.0, 0.0, 1e6, "Neighbour term weight (paper: 70).",
-                        GraphCutSegmentFilter.SetLambda)
-    SetBeta = _double("Beta", 0.286, 0.0, 100.0, "Distance term weight (paper: 0.286).",
-                      GraphCutSegmentFilter.SetBeta)
-
-
-@_stage("CTMaterialBoundary", "CT Material Boundary", ("Input", 0, "vtkPolyData"))
-class CTMaterialBoundary(MaterialBoundaryFilter):
-    """The edges between materials as polylines with the materials each side."""
+CTSegment = proxy(
+    CTSegmentFilter, "CTSegment", "CT Segment",
+    "CT slice or volume -> triangle mesh with one material per triangle (Yang et al. "
+    "2014); volumes slice by slice with one material numbering.",
+    outputs=(("Mesh", 0), ("Boundaries", 1)))
+CTMetalStreaks = proxy(
+    MetalStreakFilter, "CTMetalStreaks", "CT Metal Streaks",
+    "First stage (not in the paper): the slice with the beam-hardening streaks of its "
+    "densest material removed; the input values kept as an 'original' point array.")
+CTDensityMap = proxy(
+    DensityMapFilter, "CTDensityMap", "CT Density Map",
+    "Stage 1: the gradient density map of a slice, as a 'density' point array.")
+CTCVTSites = proxy(
+    CVTSitesFilter, "CTCVTSites", "CT CVT Sites",
+    "Stages 2-3: Ward-initialised CVT of a density map; the sites as vertices.")
+CTDelaunayMesh = proxy(
+    DelaunayMeshFilter, "CTDelaunayMesh", "CT Delaunay Mesh",
+    "Stage 4: the Delaunay triangles of the CVT sites.",
+    inputs=(("Input", 0, "vtkPolyData"),))
+CTTriangleGray = proxy(
+    TriangleGrayFilter, "CTTriangleGray", "CT Triangle Gray",
+    "Stage 5: exact area-weighted mean gray of every triangle over the image.",
+    inputs=MESH_AND_IMAGE)
+CTGraphCut = proxy(
+    GraphCutSegmentFilter, "CTGraphCut", "CT Graph Cut",
+    "Stages 6-7: recursive graph cut of the triangles into materials.",
+    inputs=MESH_AND_IMAGE)
+CTMaterialBoundary = proxy(
+    MaterialBoundaryFilter, "CTMaterialBoundary", "CT Material Boundary",
+    "The edges between materials as polylines with the materials each side.",
+    inputs=(("Input", 0, "vtkPolyData"),))

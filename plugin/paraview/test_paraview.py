@@ -19,10 +19,13 @@ from paraview.simple import (ColorBy, CreateView, GetColorTransferFunction, GetS
                              Threshold, XMLImageDataReader)
 from vtkmodules.util import numpy_support
 
-from ctseg.filters import array_to_image
-from ctseg.filters.convert import ImageGeometry, polydata_to_arrays
-from ctseg.metrics import dice_per_label, label_image
+from ctseg.density import density_map
+from ctseg.filters import array_to_image, polydata_to_arrays
+from ctseg.geometry import ImageGeometry
+from ctseg.metrics import dice_per_label
+from ctseg.params import SPECS
 from ctseg.phantoms import make_volume
+from ctseg.raster import label_image
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 LoadPlugin(os.path.join(HERE, "ctseg_paraview.py"), remote=False, ns=globals())
@@ -73,6 +76,19 @@ tmp = tempfile.mkdtemp()
 phantom = make_volume(6, 96, seed=1)
 write_vti(os.path.join(tmp, "volume.vti"), phantom.image)
 volume_reader = XMLImageDataReader(FileName=[os.path.join(tmp, "volume.vti")])
+
+
+@check("properties: every spec parameter, named and defaulted as the spec says")
+def _():
+    seg = CTSegment(Input=volume_reader)  # noqa: F821 - defined by LoadPlugin
+    for name, spec in SPECS.items():
+        prop = seg.SMProxy.GetProperty(spec.vtk)
+        assert prop is not None, f"CTSegment has no property {spec.vtk} ({name})"
+        assert prop.GetElement(0) == spec.to_number(spec.default), (spec.vtk, prop.GetElement(0))
+    dens = CTDensityMap(Input=volume_reader)  # noqa: F821
+    for spec in SPECS.values():  # the stage filter's property is named as the composite's
+        assert (dens.SMProxy.GetProperty(spec.vtk) is not None) == (spec.group == "density"), spec.vtk
+    assert dens.SMProxy.GetProperty("Floor") is None
 
 
 @check("volume: composite filter, arrays, slices at their z, Dice per material")
@@ -129,12 +145,18 @@ def _():
     assert len(np.unique(a[2]["material"])) == 4, np.unique(a[2]["material"])
     assert fetch(bnd).GetNumberOfLines() == fetch(whole, 1).GetNumberOfLines()
     rho = numpy_support.vtk_to_numpy(fetch(dens).GetPointData().GetArray("density"))
-    assert rho.min() > 0 and rho.max() > 0.5
+    assert rho.min() > 0 and rho.max() > rho.min()
+    # a stage property reaches the stage: the paper's map (no ridge, max normalisation)
+    paper = CTDensityMap(Input=png, DensityRidge=0.0, DensitySaturation=1.0)  # noqa: F821
+    got = numpy_support.vtk_to_numpy(fetch(paper).GetPointData().GetArray("density"))
+    want = density_map(g, density_ridge=0.0, density_saturation=1.0)
+    assert np.allclose(got.reshape(g.shape), want), "DensityRidge/DensitySaturation not applied"
 
 
-@check("errors: a bad parameter leaves an empty output, not a wrong one")
+@check("errors: a parameter the input cannot take leaves an empty output, not a wrong one")
 def _():
-    seg = CTSegment(Input=volume_reader, NumberOfSites=3)  # noqa: F821
+    too_many = phantom.image.shape[1] * phantom.image.shape[2] + 1  # sites per slice
+    seg = CTSegment(Input=volume_reader, NumberOfSites=too_many, NumberOfJobs=1)  # noqa: F821
     seg.UpdatePipeline()
     data = servermanager.Fetch(seg)
     assert data is None or data.GetNumberOfCells() == 0

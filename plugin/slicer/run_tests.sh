@@ -11,4 +11,4 @@ if [ ! -x "$env/bin/python" ]; then
 fi
 "$env/bin/pip" install -q slicer-core pytest
 "$env/bin/pip" install -q --force-reinstall --no-deps . && "$env/bin/pip" install -q .
-"$env/bin/python" -m pytest -p no:cacheprovider plugin/slicer/test_slicer_logic.py
+"$env/bin/python" -P -m pytest -p no:cacheprovider plugin/slicer/test_slicer_logic.py

@@ -15,9 +15,11 @@ import pytest
 import slicer
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "CTSeg"))
-from CTSegLib.logic import CTSegLogic  # noqa: E402
+from CTSegLib.logic import PARAMETERS, CTSegLogic, parameter_text  # noqa: E402
 
+from ctseg.filters import array_to_image  # noqa: E402
 from ctseg.metrics import dice_per_label  # noqa: E402
+from ctseg.params import SPECS  # noqa: E402
 from ctseg.phantoms import make_volume  # noqa: E402
 
 SPACING = (0.2, 0.2, 0.5)
@@ -128,10 +130,17 @@ def test_parameters_and_progress(loaded):
     assert steps[0] == 0.0 and steps[-1] == 1.0 and steps == sorted(steps)
     node = loaded["logic"].parameter_node()  # the same node, found again
     assert node.GetParameter("NumberOfSites") == "350"
+    # every spec parameter is in the node, under its VTK name, with the spec's default
+    assert list(PARAMETERS) == [spec.vtk for spec in SPECS.values()]
+    for name, spec in PARAMETERS.items():
+        if name != "NumberOfSites":
+            assert node.GetParameter(name) == parameter_text(spec, spec.default), name
     node.SetParameter("Lambda", "many")
     with pytest.raises(ValueError, match="Lambda"):
         loaded["logic"].parameters()
-    node.SetParameter("Lambda", "70")
+    node.SetParameter("Lambda", "50")
+    assert loaded["logic"].parameters().lam == 50.0
+    node.SetParameter("Lambda", parameter_text(SPECS["lam"], SPECS["lam"].default))
 
 
 def test_a_node_without_image_is_refused(loaded):
@@ -145,13 +154,8 @@ def test_a_node_without_image_is_refused(loaded):
 
 def test_a_single_slice_node(loaded):
     """A volume node of one slice is a 2D problem; its segments cover that slice."""
-    from vtkmodules.util import numpy_support
-    from vtkmodules.vtkCommonDataModel import vtkImageData
-
     p = loaded["phantom"]
-    img = vtkImageData()
-    img.SetDimensions(96, 96, 1)
-    img.GetPointData().SetScalars(numpy_support.numpy_to_vtk(p.image[2].ravel(), deep=True))
+    img = array_to_image(p.image[2])
     node = slicer.vtkMRMLScalarVolumeNode()
     node.SetName("one slice")
     node.SetSpacing(0.3, 0.3, 1.0)

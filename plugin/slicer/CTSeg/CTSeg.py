@@ -2,7 +2,10 @@
 per triangle (ctseg, after Yang et al. 2014).
 
 The Widget only gathers parameters into the parameter node and calls the Logic
-(``CTSegLib/logic.py``), which holds all the work and runs without the GUI.
+(``CTSegLib/logic.py``), which holds all the work and runs without the GUI. Its fields are
+made from the parameter spec (:mod:`ctseg.params`, through the Logic's
+``field_description``): a spin box with the spec's range per number ("auto" at 0 where
+the value may come from the data), a combo box per choice, a check box per switch.
 """
 import ctk
 import qt
@@ -10,7 +13,8 @@ import slicer
 from slicer.ScriptedLoadableModule import (ScriptedLoadableModule, ScriptedLoadableModuleTest,
                                            ScriptedLoadableModuleWidget)
 
-from CTSegLib.logic import PARAMETERS, CTSegLogic
+from CTSegLib.logic import (GROUP_LABELS, PARAMETERS, CTSegLogic, field_description,
+                            parameter_text)
 
 
 class CTSeg(ScriptedLoadableModule):
@@ -46,18 +50,16 @@ class CTSegWidget(ScriptedLoadableModuleWidget):
         self.volume.setMRMLScene(slicer.mrmlScene)
         form.addRow("CT volume:", self.volume)
         self.fields = {}
-        for name, (default, kind, _) in PARAMETERS.items():
-            if name == "SliceAxis":
-                field = qt.QComboBox()
-                field.addItems(["z", "y", "x"])
-            elif kind is int:
-                field = qt.QSpinBox()
-                field.setRange(0, 1000000)
-            else:
-                field = qt.QDoubleSpinBox()
-                field.setDecimals(3)
-                field.setRange(0.0, 1e6)
-            form.addRow(f"{name}:", field)
+        forms = {}
+        for name, spec in PARAMETERS.items():
+            if spec.group not in forms:
+                section = ctk.ctkCollapsibleButton()
+                section.text = GROUP_LABELS.get(spec.group, spec.group)
+                section.collapsed = spec.group != "sites"
+                form.addRow(section)
+                forms[spec.group] = qt.QFormLayout(section)
+            field = self._field(field_description(spec))
+            forms[spec.group].addRow(f"{name}:", field)
             self.fields[name] = field
         self.progress = qt.QProgressBar()
         form.addRow(self.progress)
@@ -67,22 +69,47 @@ class CTSegWidget(ScriptedLoadableModuleWidget):
         self.layout.addStretch(1)
         self._show(self.logic.parameter_node())
 
+    @staticmethod
+    def _field(desc):
+        """A Qt field for one parameter from the Logic's description of it."""
+        if desc["widget"] == "check":
+            field = qt.QCheckBox()
+        elif desc["widget"] == "combo":
+            field = qt.QComboBox()
+            field.addItems(desc["items"])
+        else:
+            field = qt.QSpinBox() if desc["widget"] == "int" else qt.QDoubleSpinBox()
+            if desc["widget"] == "float":
+                field.setDecimals(desc["decimals"])
+                field.setSingleStep(desc["step"])
+            field.setRange(desc["minimum"], desc["maximum"])
+            if desc["special"]:
+                field.setSpecialValueText(desc["special"])  # shown at the minimum
+        field.toolTip = desc["tooltip"]
+        return field
+
     def _show(self, node):
+        params = self.logic.parameters(node)
         for name, field in self.fields.items():
-            value = node.GetParameter(name)
-            if isinstance(field, qt.QComboBox):
+            spec = PARAMETERS[name]
+            value = getattr(params, spec.name)
+            if isinstance(field, qt.QCheckBox):
+                field.checked = bool(value)
+            elif isinstance(field, qt.QComboBox):
                 field.setCurrentText(value)
-            elif isinstance(field, qt.QSpinBox):
-                field.setValue(int(value))
             else:
-                field.setValue(float(value))
+                field.setValue(spec.to_number(value))
+
+    def _text(self, name, field):
+        spec = PARAMETERS[name]
+        if isinstance(field, qt.QCheckBox):
+            return parameter_text(spec, field.checked)
+        if isinstance(field, qt.QComboBox):
+            return field.currentText
+        value = field.value
+        return parameter_text(spec, spec.from_number(int(value) if spec.kind == "int" else value))
 
     def onApply(self):
-        node = self.logic.parameter_node()
-        for name, field in self.fields.items():
-            node.SetParameter(name, field.currentText if isinstance(field, qt.QComboBox)
-                              else str(field.value))
-
         def progress(fraction, message):
             self.progress.setValue(int(100 * fraction))
             self.progress.setFormat(f"{message} %p%")
@@ -90,6 +117,9 @@ class CTSegWidget(ScriptedLoadableModuleWidget):
 
         with slicer.util.tryWithErrorDisplay("ctseg could not segment the volume.",
                                              waitCursor=True):
+            node = self.logic.parameter_node()
+            for name, field in self.fields.items():
+                node.SetParameter(name, self._text(name, field))
             self.logic.run(self.volume.currentNode(), node, progress)
 
 
@@ -112,7 +142,7 @@ class CTSegTest(ScriptedLoadableModuleTest):
         self.assertEqual(result.n_materials, 4)
         self.assertGreater(model.GetPolyData().GetNumberOfCells(), 0)
         self.assertEqual(segmentation.GetSegmentation().GetNumberOfSegments(), 4)
-        from ctseg.volume import volume_labels
+        from ctseg.raster import volume_labels
 
         dice = dice_per_label(volume_labels(result, p.image.shape), p.truth.astype(np.int64), 4)
         self.assertGreater(min(dice[0], dice[2], dice[3]), 0.93)

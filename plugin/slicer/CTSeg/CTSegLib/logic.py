@@ -4,33 +4,84 @@ out, parameters kept in a parameter node.
 
 Imports only MRML (``slicer``'s node classes) and ctseg, never qt, ctk or
 ``slicer.ScriptedLoadableModule``, so it runs in the full application and in PyPI's
-slicer-core alike (the tests use the latter).
+slicer-core alike (the tests use the latter). The parameters are those of
+:mod:`ctseg.params`, every one of them, named in the parameter node by their VTK name
+(``Param.vtk``: NumberOfSites, Lambda, SliceAxis, ...) and kept as text ('auto', or 0, for
+an automatic value).
 """
 import numpy as np
-from vtkmodules.util import numpy_support
-from vtkmodules.vtkCommonDataModel import vtkImageData
 from vtkmodules.vtkCommonMath import vtkMatrix4x4
 
 import slicer
 
 from ctseg.errors import CTSegError, InputError, ParameterError
-from ctseg.filters import segmentation_to_polydata
+from ctseg.filters import array_to_image, segment_array, segmentation_to_polydata
 from ctseg.filters.convert import ImageGeometry, image_to_array
 from ctseg.filters.writers import material_colors
-from ctseg.pipeline import segment_image
-from ctseg.volume import segment_volume, volume_labels
+from ctseg.params import AUTO, AUTO_NUMBER, SPECS, resolve
+from ctseg.raster import label_image, volume_labels
 
-# parameter name -> (default, type, ctseg keyword); 0 means "from the data" where it may
-PARAMETERS = {
-    "NumberOfSites": (0, int, "n_sites"),
-    "NumberOfMaterials": (0, int, "n_materials"),
-    "Seed": (0, int, "seed"),
-    "SliceAxis": ("z", str, "axis"),
-    "NumberOfJobs": (1, int, "n_jobs"),
-    "Lambda": (70.0, float, "lam"),
-    "Beta": (0.286, float, "beta"),
-}
+PARAMETERS = {spec.vtk: spec for spec in SPECS.values()}
+"""Parameter node name -> :class:`ctseg.params.Param`, every spec parameter, in the spec's
+order."""
 MODULE_NAME = "CTSeg"
+
+
+def parameter_text(spec, value):
+    """How a parameter value is written in the parameter node (read back by
+    ``spec.parse``)."""
+    if value == AUTO:
+        return AUTO
+    if spec.kind == "bool":
+        return "true" if value else "false"
+    return str(value)
+
+
+GROUP_LABELS = {"density": "Density map", "sites": "Initial sites", "cvt": "CVT (Lloyd)",
+                "levels": "Material levels", "graphcut": "Graph cut",
+                "recursion": "Recursive cut", "corrections": "Corrections",
+                "volume": "Volume"}
+
+
+def _decimals(value):
+    text = f"{value:.12g}" if isinstance(value, float) else ""
+    if "e-" in text:
+        return int(text.split("e-")[1])
+    return len(text.split(".")[1]) if "." in text else 0
+
+
+def field_description(spec):
+    """What the Widget shows for one parameter, from the spec alone (no Qt here).
+
+    Returns
+    -------
+    dict
+        ``widget``: 'check' (bool), 'combo' (choice; ``items``), 'int' or 'float' (spin
+        boxes with ``minimum``, ``maximum``, and for floats ``decimals`` and ``step``);
+        ``special``: the text shown at the minimum when that minimum means 'auto'
+        (:data:`ctseg.params.AUTO_NUMBER`), else None; ``tooltip``: meaning, unit, range.
+    """
+    tooltip = spec.doc + (f" [{spec.unit}]" if spec.unit else "") + f"; valid: {spec.range_text()}"
+    out = {"widget": spec.kind, "tooltip": tooltip, "special": None}
+    if spec.kind == "bool":
+        out["widget"] = "check"
+    elif spec.kind == "choice":
+        out.update(widget="combo", items=list(spec.choices))
+    else:
+        low = spec.low
+        if spec.auto:
+            low = min(low, AUTO_NUMBER)
+            out["special"] = AUTO
+        out.update(minimum=low, maximum=spec.high)
+        if spec.kind == "float":
+            # a step of a tenth of the default's order of magnitude (or of the range's)
+            ref = abs(spec.default) if spec.default not in (AUTO, 0) else min(spec.high - low, 10)
+            step = 10.0 ** (np.floor(np.log10(ref)) - 1)
+            decimals = max(4, _decimals(float(step)), _decimals(float(spec.low)))
+            out.update(decimals=decimals, step=float(step))
+        else:
+            out.update(minimum=int(low), maximum=int(spec.high))
+    return out
 
 
 def register_segmentation_converters():
@@ -82,23 +133,30 @@ class CTSegLogic:
             node.SetModuleName(MODULE_NAME)
             node.SetName(f"{MODULE_NAME} parameters")
             self.scene.AddNode(node)
-        for name, (default, _, _) in PARAMETERS.items():
+        for name, spec in PARAMETERS.items():
             if not node.GetParameter(name):
-                node.SetParameter(name, str(default))
+                node.SetParameter(name, parameter_text(spec, spec.default))
         return node
 
     def parameters(self, node=None):
-        """The parameter node's values as ctseg keywords."""
+        """The parameter node's values as a :class:`ctseg.params.SegmentParams`.
+
+        Raises
+        ------
+        ParameterError
+            A value the spec refuses, naming the node parameter and the ctseg name.
+        """
         node = node or self.parameter_node()
-        out = {}
-        for name, (default, kind, key) in PARAMETERS.items():
-            text = node.GetParameter(name) or str(default)
+        values = {}
+        for name, spec in PARAMETERS.items():
+            text = node.GetParameter(name)
+            if not text:
+                continue
             try:
-                value = kind(text)
-            except ValueError:
-                raise ParameterError(f"{name}: {text!r} is not a {kind.__name__}") from None
-            out[key] = value
-        return out
+                values[spec.name] = spec.parse(text)
+            except ParameterError as exc:
+                raise ParameterError(f"{name}: {exc}") from None
+        return resolve(**values)
 
     # --- the work -------------------------------------------------------------------
     def run(self, volume_node, parameter_node=None, progress=None):
@@ -121,24 +179,15 @@ class CTSegLogic:
             raise InputError("volume: the node holds no image data")
         arr, _ = image_to_array(image)
         geom = volume_geometry(volume_node)
-        kw = self.parameters(parameter_node)
-        common = dict(n_sites=kw["n_sites"] or None, seed=kw["seed"],
-                      n_materials=kw["n_materials"] or None, lam=kw["lam"], beta=kw["beta"])
+        params = self.parameters(parameter_node)
         name = volume_node.GetName()
         report(0.0, f"segmenting {name}")
-        if arr.ndim == 2:
-            result = segment_image(arr, progress=lambda f, s: report(0.9 * f, s), **common)
-            labels = None
-        else:
-            result = segment_volume(arr, axis=kw["axis"], n_jobs=kw["n_jobs"],
-                                    progress=lambda f, s: report(0.9 * f, s), **common)
-            labels = volume_labels(result, arr.shape)
+        result = segment_array(arr, params, progress=lambda f, s: report(0.9 * f, s))
+        labels = volume_labels(result, arr.shape) if arr.ndim == 3 else None
         mesh, _ = segmentation_to_polydata(result, geom)
         report(0.9, "building the nodes")
         model = self._model_node(mesh, f"{name} ctseg mesh", result.n_materials)
         if labels is None:
-            from ctseg.metrics import label_image
-
             labels = label_image(result.points, result.triangles, result.material, arr.shape)[None]
         segmentation = self._segmentation_node(labels, volume_node, f"{name} ctseg segmentation",
                                                result.material_gray)
@@ -176,12 +225,9 @@ class CTSegLogic:
         labelmap = slicer.vtkMRMLLabelMapVolumeNode()
         labelmap.SetName(f"{name} labels")
         self.scene.AddNode(labelmap)
-        img = vtkImageData()
-        img.SetDimensions(labels.shape[2], labels.shape[1], labels.shape[0])
-        # label k + 1 for material k: 0 is the background an import leaves out
-        img.GetPointData().SetScalars(
-            numpy_support.numpy_to_vtk((labels + 1).astype(np.int16).ravel(), deep=True))
-        labelmap.SetAndObserveImageData(img)
+        # label k + 1 for material k: 0 is the background an import leaves out; the
+        # image keeps the identity geometry and the node the volume's IJK-to-RAS
+        labelmap.SetAndObserveImageData(array_to_image((labels + 1).astype(np.int16)))
         m = vtkMatrix4x4()
         volume_node.GetIJKToRASMatrix(m)
         labelmap.SetIJKToRASMatrix(m)

@@ -1,0 +1,345 @@
+"""Compiled kernels (numba) of the exact tetrahedron/voxel overlaps (SPEC 9.5).
+
+Each tetrahedron is held as a convex polyhedron whose vertices have three neighbours each,
+in counter-clockwise order seen from outside (the representation of Powell and Abel's r3d,
+J. Comput. Phys. 297, 2015). A plane ``x_axis = c`` splits a polyhedron into the part below
+and the part above: every edge that crosses the plane gets two new vertices at the crossing
+(one for each part), linked around the cap by walking the faces. The tetrahedron is cut by
+the voxel planes ``z = k + 1/2`` in turn (each cut leaves the slab piece below and the rest
+above), each slab piece by the planes ``y = j + 1/2``, each row piece by ``x = i + 1/2``; so
+only the cells a piece reaches are visited, and the pieces of one tetrahedron partition it.
+
+Vertices on a plane: the cells a piece reaches run from ``floor(lo + 1/2)`` to
+``ceil(hi - 1/2)`` of its own vertices' extent, so a plane a piece only touches (a face, an
+edge or a vertex on it) is never cut and gives no sliver. A plane that is cut has a vertex
+strictly on either side; a vertex on it counts as above (the crossing edges from it get
+zero length: the pieces stay exact). A polyhedron with no vertex strictly above (below) a
+plane goes whole below (above). New vertices get ``x_axis = c`` exactly.
+
+Private: :mod:`ctseg.tetra_gray` is the entry point.
+"""
+import numpy as np
+from numba import njit
+
+# a tetrahedron cut by the 6 planes of a cell has at most 10 faces, so 2 * 10 - 4 = 16
+# vertices; during a split the crossing edges (at most 3/2 * 16) add two vertices each
+_MAXV = 64
+
+# neighbours of the 4 vertices of a positively oriented tetrahedron, counter-clockwise
+# seen from outside: walking a face (the next neighbour after the one we came from)
+# visits the outward faces (0, 2, 1), (0, 3, 2), (0, 1, 3), (1, 2, 3)
+_TET_NBRS = ((2, 3, 1), (0, 3, 2), (1, 3, 0), (0, 2, 1))
+
+
+@njit(cache=True)
+def _init_tet(corners, negative, pos, nb):
+    """Load tetrahedron ``corners`` (4, 3) into the polyhedron buffers (vertices 1 and 2
+    swapped when ``negative``ly oriented); returns 4."""
+    for v in range(4):
+        src = 3 - v if negative and (v == 1 or v == 2) else v
+        for d in range(3):
+            pos[v, d] = corners[src, d]
+            nb[v, d] = _TET_NBRS[v][d]
+    return 4
+
+
+@njit(cache=True)
+def _copy(pos, nb, n, out_pos, out_nb):
+    for v in range(n):
+        for d in range(3):
+            out_pos[v, d] = pos[v, d]
+            out_nb[v, d] = nb[v, d]
+    return n
+
+
+@njit(cache=True)
+def _split(pos, nb, n, axis, c, bpos, bnb, apos, anb, wpos, wnb, side, newid):
+    """Split polyhedron (pos, nb, n) by the plane ``x_axis = c``.
+
+    The part below goes to (bpos, bnb), the part above to (apos, anb); (wpos, wnb),
+    ``side`` and ``newid`` are work buffers. Returns the vertex counts (below, above);
+    0 for an empty part, (-1, -1) if the work buffer is too small. The input buffers may
+    be the same as neither output.
+    """
+    n_above = 0
+    n_below = 0
+    for v in range(n):
+        s = pos[v, axis] - c
+        if s > 0:
+            n_above += 1
+        elif s < 0:
+            n_below += 1
+    if n_above == 0:
+        return _copy(pos, nb, n, bpos, bnb), 0
+    if n_below == 0:
+        return 0, _copy(pos, nb, n, apos, anb)
+    for v in range(n):
+        side[v] = 1 if pos[v, axis] - c < 0 else 0  # 1: below
+    crossing = 0
+    for v in range(n):
+        for p in range(3):
+            crossing += side[v] == 0 and side[nb[v, p]] == 1
+    if n + 2 * crossing > wpos.shape[0]:  # cannot happen for convex pieces; never write past
+        return -1, -1
+    _copy(pos, nb, n, wpos, wnb)
+    m = n
+    for vcur in range(n):
+        if side[vcur] == 1:
+            continue
+        for p in range(3):
+            vnext = wnb[vcur, p]
+            if vnext >= n or side[vnext] == 0:
+                continue
+            wa = c - wpos[vnext, axis]  # > 0
+            wb = wpos[vcur, axis] - c  # >= 0
+            for d in range(3):
+                x = (wa * wpos[vcur, d] + wb * wpos[vnext, d]) / (wa + wb)
+                wpos[m, d] = x
+                wpos[m + 1, d] = x
+            wpos[m, axis] = c
+            wpos[m + 1, axis] = c
+            # m: the copy above, joined to vcur; m + 1: the copy below, joined to vnext
+            wnb[m, 0] = vcur
+            wnb[vcur, p] = m
+            side[m] = 0
+            wnb[m + 1, 0] = vnext
+            for q in range(3):
+                if wnb[vnext, q] == vcur:
+                    wnb[vnext, q] = m + 1
+                    break
+            side[m + 1] = 1
+            m += 2
+    # link the new vertices around the cap: walk the face from each to the next new one
+    for vstart in range(n, m):
+        vcur = vstart
+        vnext = wnb[vcur, 0]
+        while True:
+            q = 0
+            while wnb[vnext, q] != vcur:
+                q += 1
+            vcur = vnext
+            vnext = wnb[vcur, (q + 1) % 3]
+            if vcur >= n:
+                break
+        wnb[vstart, 2] = vcur
+        wnb[vcur, 1] = vstart
+    nbl = 0
+    nab = 0
+    for v in range(m):
+        if side[v] == 1:
+            newid[v] = nbl
+            nbl += 1
+        else:
+            newid[v] = nab
+            nab += 1
+    for v in range(m):
+        w = newid[v]
+        if side[v] == 1:
+            for d in range(3):
+                bpos[w, d] = wpos[v, d]
+                bnb[w, d] = newid[wnb[v, d]]
+        else:
+            for d in range(3):
+                apos[w, d] = wpos[v, d]
+                anb[w, d] = newid[wnb[v, d]]
+    return nbl, nab
+
+
+@njit(cache=True)
+def _volume(pos, nb, n, mark):
+    """Volume of the polyhedron: a triangle fan over each face (walked counter-clockwise
+    seen from outside), ``det(a, b, c) / 6`` each."""
+    for v in range(n):
+        for d in range(3):
+            mark[v, d] = False
+    six = 0.0
+    for vs in range(n):
+        for ps in range(3):
+            if mark[vs, ps]:
+                continue
+            mark[vs, ps] = True
+            ax, ay, az = pos[vs, 0], pos[vs, 1], pos[vs, 2]
+            vcur = vs
+            vnext = nb[vs, ps]
+            first = True
+            while vnext != vs:
+                q = 0
+                while nb[vnext, q] != vcur:
+                    q += 1
+                bx, by, bz = pos[vnext, 0] - ax, pos[vnext, 1] - ay, pos[vnext, 2] - az
+                vprev = vcur
+                vcur = vnext
+                pn = (q + 1) % 3
+                mark[vcur, pn] = True
+                vnext = nb[vcur, pn]
+                if first:
+                    first = False
+                    continue
+                # triangle (a, prev, cur): a . ((prev - a) x (cur - a)) / 6
+                px, py, pz = pos[vprev, 0] - ax, pos[vprev, 1] - ay, pos[vprev, 2] - az
+                six += ax * (py * bz - pz * by) + ay * (pz * bx - px * bz) \
+                    + az * (px * by - py * bx)
+    return six / 6.0
+
+
+@njit(cache=True)
+def _cell_range(pos, n, axis, size):
+    """Cells [lo, hi] a polyhedron reaches along ``axis`` (cell i spans i -/+ 1/2);
+    (0, -1) when it reaches none."""
+    lo = pos[0, axis]
+    hi = pos[0, axis]
+    for v in range(1, n):
+        lo = min(lo, pos[v, axis])
+        hi = max(hi, pos[v, axis])
+    a = min(max(int(np.floor(lo + 0.5)), 0), size - 1)
+    b = min(max(int(np.ceil(hi - 0.5)), 0), size - 1)
+    return a, b
+
+
+@njit(cache=True)
+def _tet_cells(corners, nz, ny, nx, cells, vols, pos_buf, nb_buf, side, newid, mark):
+    """Every (flat voxel index, overlap volume) of one tetrahedron, in index units.
+
+    ``corners`` (4, 3) lie inside the box; ``cells`` and ``vols`` hold at least as many
+    entries as the tetrahedron's range of cells; ``pos_buf`` (8, _MAXV, 3) float64 and
+    ``nb_buf`` (8, _MAXV, 3) int64 hold the polyhedra. Returns the number written, -1 if
+    a piece outgrew the buffers.
+    """
+    # local origin: an integer corner, so that the planes stay exact and the volumes are
+    # formed from small numbers
+    o = np.empty(3, np.int64)
+    for d in range(3):
+        o[d] = int(np.floor(min(corners[0, d], corners[1, d], corners[2, d], corners[3, d])))
+    loc = np.empty((4, 3))
+    for v in range(4):
+        for d in range(3):
+            loc[v, d] = corners[v, d] - o[d]
+    # in local coordinates: cell i spans [i - 1/2, i + 1/2], the box ends at cell n - 1 - o
+    z0, z1 = _cell_range(loc, 4, 2, nz - o[2])
+    y0, y1 = _cell_range(loc, 4, 1, ny - o[1])
+    x0, x1 = _cell_range(loc, 4, 0, nx - o[0])
+    if z0 > z1 or y0 > y1 or x0 > x1:
+        return 0
+    e = np.empty((3, 3))
+    for v in range(3):
+        for d in range(3):
+            e[v, d] = loc[v + 1, d] - loc[0, d]
+    det = (e[0, 0] * (e[1, 1] * e[2, 2] - e[1, 2] * e[2, 1])
+           - e[0, 1] * (e[1, 0] * e[2, 2] - e[1, 2] * e[2, 0])
+           + e[0, 2] * (e[1, 0] * e[2, 1] - e[1, 1] * e[2, 0]))
+    if det == 0.0:
+        return 0
+    if z0 == z1 and y0 == y1 and x0 == x1:  # inside one cell
+        cells[0] = ((z0 + o[2]) * ny + y0 + o[1]) * nx + x0 + o[0]
+        vols[0] = abs(det) / 6.0
+        return 1
+    # the sweep, one level per axis (z, y, x): level L cuts its rest polyhedron (buffer
+    # 2 L or 2 L + 1, alternating) at its next plane; the piece below goes to level L + 1
+    # (buffer 6 after x); one call site of _split keeps the compiled code small
+    size = (nz - o[2], ny - o[1], nx - o[0])
+    cur = np.zeros(3, np.int64)  # buffer of each level's rest
+    nrest = np.zeros(3, np.int64)
+    idx = np.zeros(3, np.int64)
+    end = np.zeros(3, np.int64)
+    nrest[0] = _init_tet(loc, det < 0.0, pos_buf[0], nb_buf[0])
+    idx[0] = z0
+    end[0] = z1
+    level = 0
+    count = 0
+    while level >= 0:
+        if nrest[level] == 0 or idx[level] > end[level]:
+            level -= 1
+            continue
+        axis = 2 - level
+        r = cur[level]
+        dst = 2 * level + 2 if level < 2 else 6
+        if idx[level] < end[level]:
+            other = 4 * level + 1 - r  # the level's other rest buffer
+            npiece, nrest[level] = _split(pos_buf[r], nb_buf[r], nrest[level], axis,
+                                          idx[level] + 0.5, pos_buf[dst], nb_buf[dst],
+                                          pos_buf[other], nb_buf[other], pos_buf[7],
+                                          nb_buf[7], side, newid)
+            cur[level] = other
+            if npiece < 0:
+                return -1
+        else:
+            npiece = _copy(pos_buf[r], nb_buf[r], nrest[level], pos_buf[dst], nb_buf[dst])
+            nrest[level] = 0
+        idx[level] += 1
+        if npiece == 0:
+            continue
+        if level < 2:
+            level += 1
+            cur[level] = dst
+            nrest[level] = npiece
+            idx[level], end[level] = _cell_range(pos_buf[dst], npiece, 2 - level, size[level])
+            continue
+        vol = _volume(pos_buf[6], nb_buf[6], npiece, mark)
+        if vol > 0.0:
+            cells[count] = ((idx[0] - 1 + o[2]) * ny + idx[1] - 1 + o[1]) * nx + idx[2] - 1 + o[0]
+            vols[count] = vol
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def _overlaps(P, nz, ny, nx, img, values, tet_vol, tet_w, vox_vol, vox_w, record):
+    """Visit every (tetrahedron, voxel) overlap of positive volume.
+
+    ``P`` (m, 4, 3): the corners in index units, inside the box. With an image
+    (``img.size > 0``, flat): add each overlap's volume to ``tet_vol`` and volume x gray
+    to ``tet_w`` (per tetrahedron). With per-tetrahedron ``values``: add each overlap's
+    volume to ``vox_vol`` and volume x value to ``vox_w`` (per flat voxel). With
+    ``record``: also return all overlaps. Returns (count, tet, voxel, volume); the arrays
+    are empty unless ``record``; count = -1 - t if tetrahedron t outgrew the buffers.
+    """
+    m = P.shape[0]
+    pos_buf = np.empty((8, _MAXV, 3))
+    nb_buf = np.empty((8, _MAXV, 3), np.int64)
+    side = np.empty(_MAXV, np.int64)
+    newid = np.empty(_MAXV, np.int64)
+    mark = np.empty((_MAXV, 3), np.bool_)
+    cells = np.empty(64, np.int64)
+    vols = np.empty(64)
+    cap = 4 * m + 16 if record else 0
+    t_out = np.empty(cap, np.int64)
+    v_out = np.empty(cap, np.int64)
+    a_out = np.empty(cap)
+    count = 0
+    for t in range(m):
+        span = 1
+        for d in range(3):
+            lo = min(P[t, 0, d], P[t, 1, d], P[t, 2, d], P[t, 3, d])
+            hi = max(P[t, 0, d], P[t, 1, d], P[t, 2, d], P[t, 3, d])
+            span *= int(np.ceil(hi - 0.5)) - int(np.floor(lo + 0.5)) + 2
+        if span > cells.shape[0]:
+            cells = np.empty(2 * span, np.int64)
+            vols = np.empty(2 * span)
+        n = _tet_cells(P[t], nz, ny, nx, cells, vols, pos_buf, nb_buf, side, newid, mark)
+        if n < 0:
+            return -1 - t, t_out[:0], v_out[:0], a_out[:0]
+        for q in range(n):
+            c = cells[q]
+            a = vols[q]
+            if img.shape[0] > 0:
+                tet_vol[t] += a
+                tet_w[t] += a * img[c]
+            if values.shape[0] > 0:
+                vox_vol[c] += a
+                vox_w[c] += a * values[t]
+        if record:
+            if count + n > t_out.shape[0]:
+                new_cap = 2 * (count + n)
+                t_new = np.empty(new_cap, np.int64)
+                v_new = np.empty(new_cap, np.int64)
+                a_new = np.empty(new_cap)
+                t_new[:count] = t_out[:count]
+                v_new[:count] = v_out[:count]
+                a_new[:count] = a_out[:count]
+                t_out, v_out, a_out = t_new, v_new, a_new
+            for q in range(n):
+                t_out[count + q] = t
+                v_out[count + q] = cells[q]
+                a_out[count + q] = vols[q]
+        count += n
+    return count, t_out[:count], v_out[:count], a_out[:count]

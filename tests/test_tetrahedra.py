@@ -1,0 +1,80 @@
+"""Delaunay tetrahedra of 3D sites (SPEC 9.4): they fill the box, none is flat, faces pair
+up, quality measures are right."""
+import numpy as np
+import pytest
+
+from ctseg.errors import MeshCheckError
+from ctseg.tetrahedra import (delaunay_tetrahedra, face_graph, tetra_faces, tetra_quality,
+                              tetra_volumes)
+
+
+def _corners(box):
+    return np.array([[x, y, z] for x in (0, box[0]) for y in (0, box[1]) for z in (0, box[2])], float)
+
+
+def _grid_sites(n, jitter, seed=0):
+    """A regular (n+1)^3 grid of sites, interior ones jittered: the face sites stay a
+    regular grid, so Qhull meets many cospherical and coplanar sets."""
+    rng = np.random.default_rng(seed)
+    g = np.stack(np.meshgrid(*[np.arange(n + 1.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    inner = (g > 0).all(1) & (g < n).all(1)
+    g[inner] += rng.uniform(-jitter, jitter, (inner.sum(), 3))
+    return g
+
+
+@pytest.mark.parametrize("sites,box", [
+    (np.vstack([_corners((10, 8, 6)), np.random.default_rng(0).uniform(0, 1, (500, 3)) * (10, 8, 6)]), (10, 8, 6)),
+    (_grid_sites(6, 0.2), (6, 6, 6)),
+    (_grid_sites(5, 0.0), (5, 5, 5)),  # every site on a regular grid: the worst case
+])
+def test_tetrahedra_fill_the_box_and_pair_their_faces(sites, box):
+    mesh = delaunay_tetrahedra(sites, box)
+    vol = tetra_volumes(mesh.points, mesh.tetrahedra)
+    assert vol.min() > 0
+    assert abs(vol.sum() - np.prod(box)) <= 1e-9 * np.prod(box)
+    # sites moved (if at all) by far less than a voxel, and faces and edges kept
+    assert np.abs(mesh.points - sites).max() < 1e-3
+    for ax in range(3):
+        on = np.isclose(sites[:, ax], 0) | np.isclose(sites[:, ax], box[ax])
+        np.testing.assert_array_equal(mesh.points[on, ax], sites[on, ax])
+    # every face is shared by two tetrahedra or lies on the box, outward
+    bf = mesh.boundary_faces
+    p = mesh.points[bf]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    area = 0.5 * np.linalg.norm(normal, axis=1)
+    box = np.asarray(box, float)
+    assert np.isclose(area.sum(), 2 * (box[0] * box[1] + box[1] * box[2] + box[0] * box[2]), rtol=1e-9)
+    assert np.all(np.einsum("ij,ij->i", normal, p.mean(axis=1) - box / 2) > 0)
+    assert len(mesh.adjacency) * 2 + len(bf) == 4 * len(mesh.tetrahedra)
+
+
+def test_shared_faces_are_outward_from_the_first_tetrahedron():
+    mesh = delaunay_tetrahedra(_grid_sites(4, 0.25, seed=3), (4, 4, 4))
+    p = mesh.points[mesh.shared_faces]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    c0 = mesh.points[mesh.tetrahedra[mesh.adjacency[:, 0]]].mean(axis=1)
+    assert np.all(np.einsum("ij,ij->i", normal, p.mean(axis=1) - c0) > 0)
+
+
+def test_a_missing_corner_is_refused():
+    sites = np.vstack([_corners((2, 2, 2))[1:], [[1.0, 1.0, 1.0]]])
+    with pytest.raises(MeshCheckError, match="fill"):
+        delaunay_tetrahedra(sites, (2, 2, 2))
+
+
+def test_face_graph_refuses_a_face_of_three_tetrahedra():
+    tets = np.array([[0, 1, 2, 3], [0, 1, 2, 4], [0, 1, 2, 5]])
+    with pytest.raises(MeshCheckError, match="more than two"):
+        face_graph(tets)
+    assert tetra_faces(tets).shape == (12, 3)
+
+
+def test_quality_of_a_regular_and_a_sliver_tetrahedron():
+    s = np.sqrt(8 / 9.0)
+    reg = [[0, 0, 1], [s, 0, -1 / 3], [-s / 2, np.sqrt(2 / 3), -1 / 3], [-s / 2, -np.sqrt(2 / 3), -1 / 3]]
+    q = tetra_quality(reg, [[0, 1, 2, 3]])
+    assert np.isclose(q["min_dihedral_deg"], np.degrees(np.arccos(1 / 3)))
+    assert np.isclose(q["min_radius_ratio"], 1.0)
+    sliver = [[0, 0, 0], [1, 0, 0], [0.5, 0.5, 0.01], [0.5, -0.5, 0.01]]
+    q = tetra_quality(sliver, [[0, 1, 2, 3]])
+    assert q["min_dihedral_deg"] < 3 and q["min_radius_ratio"] < 0.1
