@@ -14,6 +14,9 @@ from .graphcut import graphcut_split
 from .recursive_cut import segment_triangles
 from .labelling import label_mesh
 from .pipeline import SegmentedMesh, default_n_sites, segment_image
+from .tetrahedra import delaunay_tetrahedra, TetraMesh
+from .tetra_gray import tetra_gray
+from .pipeline3d import TetraSegmentation, segment_volume_3d
 from .volume import segment_array, segment_volume
 
 __version__ = "0.1.0"
@@ -21,6 +24,7 @@ __all__ = [
     "density_map", "initial_sites", "random_sites", "density_random_sites", "ward_sites",
     "lloyd_cvt", "CVTResult", "delaunay_mesh", "TriangleMesh", "triangle_gray",
     "graphcut_split", "segment_triangles", "label_mesh", "segment_image", "SegmentedMesh",
-    "segment_volume", "segment_array", "default_n_sites", "SegmentParams", "AUTO", "CTSegError",
+    "segment_volume", "segment_array", "default_n_sites", "delaunay_tetrahedra", "TetraMesh",
+    "tetra_gray", "TetraSegmentation", "segment_volume_3d", "SegmentParams", "AUTO", "CTSegError",
     "InputError", "ParameterError", "MeshCheckError", "ResumeError",
 ]

@@ -185,6 +185,12 @@ def correct_metal_streaks(image, levels, *, flat=None,
     streak basis assumes parallel-beam
     geometry over the whole image; a crop that cuts off metal, or fan/cone-beam data,
     fit less well and get a smaller weight.
+
+    Example
+    -------
+    >>> fix = correct_metal_streaks(np.zeros((16, 16)), [0.0])
+    >>> fix.reason
+    'fewer than two materials'
     """
     img = as_image(image)
     lv = np.sort(np.asarray(levels, float).ravel())

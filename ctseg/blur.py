@@ -14,12 +14,13 @@ once more with those grays.
 """
 import numpy as np
 from scipy import ndimage
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
-from ._validate import as_image, check_number
+from ._validate import as_image, as_volume, check_number
 from .errors import ParameterError
+from .graph import connected_pieces
 from .params import DEFAULTS, check
+from .tetra_gray import tetra_gray, voxel_mean_of_tetrahedra
+from .tetrahedra import tetra_faces, tetra_volumes
 from .triangle_gray import pixel_mean_of_triangles, triangle_gray
 from .triangulation import triangle_areas
 
@@ -51,8 +52,7 @@ def region_levels(material, gray, area, adjacency):
     m = len(material)
     same = material[adjacency[:, 0]] == material[adjacency[:, 1]]
     a, b = adjacency[same, 0], adjacency[same, 1]
-    _, region = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)),
-                                     directed=False)
+    _, region = connected_pieces(np.column_stack([a, b]), m)
     order = np.lexsort((gray, region))  # by region, then by gray
     reg, w = region[order], area[order]
     cum = np.cumsum(w)
@@ -105,10 +105,10 @@ def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_
 
     Parameters
     ----------
-    image : (rows, cols) array_like
-        The slice, in the same units as the levels.
-    levels_image : (rows, cols) array_like
-        What the slice would be without blur (:func:`level_image` of a labelling).
+    image : (rows, cols) or (nz, ny, nx) array_like
+        The slice or volume, in the same units as the levels.
+    levels_image : array_like, the shape of ``image``
+        What it would be without blur (:func:`level_image` of a labelling).
     band_px : int
         Half width of the band around level changes.
     blur_max_px : float
@@ -122,12 +122,16 @@ def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_
     Raises
     ------
     InputError
-        If either image is not a finite 2D array.
+        If either image is not a finite 2D or 3D array.
     ParameterError
         If the shapes differ or ``band_px``, ``blur_max_px`` are out of range.
     """
-    img = as_image(image)
-    lev = as_image(levels_image, "levels_image")
+    if np.ndim(image) == 3:  # a volume: the same fit with a 3D Gaussian (voxel units)
+        img = as_volume(image).astype(np.float64)
+        lev = as_volume(levels_image, "levels_image").astype(np.float64)
+    else:
+        img = as_image(image)
+        lev = as_image(levels_image, "levels_image")
     if lev.shape != img.shape:
         raise ParameterError(f"levels_image: shape {lev.shape} differs from the image's {img.shape}")
     band_px = check_number(band_px, "band_px", low=1, integer=True)
@@ -222,6 +226,21 @@ def blur_corrected_gray(gray, points, triangles, level, image, sigma=None,
     corrected : (m,) ndarray
     sigma : float
         The standard deviation used.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from scipy import ndimage
+    >>> from ctseg import delaunay_mesh, triangle_gray
+    >>> ys, xs = np.mgrid[0:33:4, 0:33:4]
+    >>> mesh = delaunay_mesh(np.column_stack([xs.ravel(), ys.ravel()]).astype(float))
+    >>> cx = mesh.points[mesh.triangles].mean(axis=1)[:, 0]
+    >>> level = np.where(cx < 16, 0.0, 100.0)
+    >>> image = ndimage.gaussian_filter(level_image(mesh.points, mesh.triangles, level, (33, 33)), 1.0)
+    >>> gray = triangle_gray(image, mesh.points, mesh.triangles)
+    >>> fixed, sigma = blur_corrected_gray(gray, mesh.points, mesh.triangles, level, image, sigma=1.0)
+    >>> bool(np.allclose(fixed, level))
+    True
     """
     img = as_image(image)
     min_self_weight = check("blur_min_self_weight", blur_min_self_weight)
@@ -236,4 +255,71 @@ def blur_corrected_gray(gray, points, triangles, level, image, sigma=None,
     blurred = ndimage.gaussian_filter(lev, sigma, mode="nearest") if sigma > 0 else lev
     predicted = triangle_gray(blurred, points, triangles)
     w = np.maximum(self_weight(points, triangles, sigma), min_self_weight)
+    return np.asarray(level, float) + (gray - predicted) / w, float(sigma)
+
+
+def self_weight_3d(points, tetrahedra, sigma):
+    """Share of a tetrahedron's own signal that a Gaussian blur leaves inside it:
+    ``1 - S sigma / (sqrt(2 pi) V)`` for surface area S and volume V (the 2D rule of
+    :func:`self_weight` one dimension up; all in voxel units)."""
+    points = np.asarray(points, float)
+    f = points[tetra_faces(tetrahedra)].reshape(-1, 4, 3, 3)
+    area = 0.5 * np.linalg.norm(np.cross(f[:, :, 1] - f[:, :, 0], f[:, :, 2] - f[:, :, 0]), axis=2)
+    vol = np.abs(tetra_volumes(points, tetrahedra))
+    return 1.0 - area.sum(axis=1) * float(sigma) / (np.sqrt(2.0 * np.pi) * np.maximum(vol, 1e-300))
+
+
+def blur_corrected_gray_3d(gray, points, tetrahedra, level, volume, spacing=(1.0, 1.0, 1.0),
+                           sigma=None, blur_min_self_weight=DEFAULTS.blur_min_self_weight,
+                           blur_max_px=DEFAULTS.blur_max_px):
+    """Tetrahedron grays with the blur a labelling predicts taken off: the rule of
+    :func:`blur_corrected_gray` in 3D, with :func:`ctseg.tetra_gray.voxel_mean_of_tetrahedra`
+    for the level volume, a Gaussian in voxel units and :func:`self_weight_3d`.
+
+    Parameters
+    ----------
+    gray : (m,) array_like
+        Tetrahedron mean grays, the units of ``volume``.
+    points, tetrahedra
+        The mesh, points in physical units (index x spacing).
+    level : (m,) array_like
+    volume : (nz, ny, nx) array_like
+    spacing : (3,) array_like
+    sigma, blur_min_self_weight, blur_max_px
+        As in :func:`blur_corrected_gray`.
+
+    Returns
+    -------
+    corrected : (m,) ndarray
+    sigma : float
+        Voxels.
+
+    Example
+    -------
+    >>> from ctseg.tetrahedra import delaunay_tetrahedra
+    >>> rng = np.random.default_rng(0)
+    >>> c = np.array([[x, y, z] for x in (0, 15) for y in (0, 15) for z in (0, 15)], float)
+    >>> mesh = delaunay_tetrahedra(np.vstack([c, rng.uniform(0, 15, (300, 3))]), (15, 15, 15))
+    >>> level = np.where(mesh.points[mesh.tetrahedra].mean(axis=1)[:, 0] < 7, 0.0, 100.0)
+    >>> sharp, _ = voxel_mean_of_tetrahedra(level, mesh.points, mesh.tetrahedra, (16, 16, 16))
+    >>> vol = ndimage.gaussian_filter(sharp, 1.0, mode="nearest")
+    >>> gray = tetra_gray(vol, mesh.points, mesh.tetrahedra)
+    >>> fixed, s = blur_corrected_gray_3d(gray, mesh.points, mesh.tetrahedra, level, vol, sigma=1.0)
+    >>> bool(np.allclose(fixed, level))
+    True
+    """
+    vol = as_volume(volume).astype(np.float64)
+    sp = np.asarray(spacing, float)
+    min_self_weight = check("blur_min_self_weight", blur_min_self_weight)
+    gray = np.asarray(gray, float)
+    if gray.shape != (len(tetrahedra),):
+        raise ParameterError(f"gray: expected one value per tetrahedron ({len(tetrahedra)}), "
+                             f"got shape {gray.shape}")
+    lev, _ = voxel_mean_of_tetrahedra(np.asarray(level, float), points, tetrahedra, vol.shape, sp)
+    if sigma is None:
+        sigma = estimate_blur(vol, lev, blur_max_px=blur_max_px)
+    sigma = check_number(sigma, "sigma", low=0.0)
+    blurred = ndimage.gaussian_filter(lev, sigma, mode="nearest") if sigma > 0 else lev
+    predicted = tetra_gray(blurred, points, tetrahedra, sp)
+    w = np.maximum(self_weight_3d(np.asarray(points, float) / sp, tetrahedra, sigma), min_self_weight)
     return np.asarray(level, float) + (gray - predicted) / w, float(sigma)

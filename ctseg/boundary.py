@@ -20,6 +20,12 @@ def material_boundary(shared_edges, adjacency, material):
         Vertex pairs of the boundary edges.
     sides : (b, 2) int64 ndarray
         The two materials each side, smaller first.
+
+    Example
+    -------
+    >>> edges, sides = material_boundary([[1, 2]], [[0, 1]], [0, 3])
+    >>> edges.tolist(), sides.tolist()
+    ([[1, 2]], [[0, 3]])
     """
     mat = np.asarray(material)
     adjacency = np.asarray(adjacency, np.int64).reshape(-1, 2)

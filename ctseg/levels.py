@@ -153,6 +153,14 @@ def pixel_material_levels(image255, flat, merge_k=DEFAULTS.merge_k,
     levels : (K,) ndarray, ascending
     sigma : float
         The noise used (0-255 scale).
+
+    Example
+    -------
+    >>> rng = np.random.default_rng(0)
+    >>> img = np.where(np.arange(64)[None, :] < 32, 40.0, 200.0) + rng.normal(0, 2, (64, 64))
+    >>> levels, sigma = pixel_material_levels(img, flat_pixels(img))
+    >>> np.round(levels).tolist()
+    [40.0, 200.0]
     """
     merge_k, merge_rel = check("merge_k", merge_k), check("merge_rel", merge_rel)
     merge_floor_255 = check("merge_floor_255", merge_floor_255)
@@ -238,6 +246,13 @@ def material_levels(images, scale, *, flat_sigma_px=DEFAULTS.flat_sigma_px,
     levels : (K,) ndarray, ascending
     sigma_255 : float
         Noise of the dominant material's flat pixels (0-255 scale).
+
+    Example
+    -------
+    >>> img = np.zeros((40, 40)); img[10:30, 10:30] = 1.0
+    >>> levels, _ = material_levels(img, (0.0, 255.0))
+    >>> np.round(levels).tolist()
+    [0.0, 255.0]
     """
     stack = np.asarray(images)
     stack = stack[None] if stack.ndim == 2 else stack

@@ -70,3 +70,106 @@ def check_mesh(points, triangles, what="mesh"):
                         if k not in ("faces", "vertices", "ok") and v)
         raise MeshCheckError(f"{what}: failed the mesh checks ({bad}); nothing was written")
     return report
+
+
+def enclosed_volume(points, triangles):
+    """Signed volume a closed triangle surface encloses (divergence theorem; positive for
+    outward normals), summed about the points' centre so that a far origin costs no
+    precision."""
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    tri = np.asarray(triangles, np.int64).reshape(-1, 3)
+    if len(tri) == 0:
+        return 0.0
+    p = pts[tri] - 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0)
+
+
+def self_intersecting_faces(points, triangles):
+    """Faces that pymeshlab finds crossing another face of the same mesh.
+
+    Coincident vertices are merged first: where pieces of a solid touch at a vertex the
+    surface has one copy of it per piece, and faces meeting at two copies of one point
+    would otherwise count as crossing."""
+    import pymeshlab
+
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    tri = np.asarray(triangles, np.int64).reshape(-1, 3)
+    if len(tri) == 0:
+        return 0
+    uniq, inverse = np.unique(pts, axis=0, return_inverse=True)
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=uniq,
+                               face_matrix=inverse.ravel()[tri].astype(np.int32)))
+    ms.compute_selection_by_self_intersections_per_face()
+    return int(ms.current_mesh().selected_face_number())
+
+
+def closed_surface_report(points, triangles, element_volume=None, rel_volume_tol=1e-9):
+    """Measure what makes a closed surface (a material's boundary) unfit to write.
+
+    Everything :func:`mesh_check_report` measures, plus: boundary edges (a hole),
+    self-intersecting faces (:func:`self_intersecting_faces`), the enclosed volume (which
+    must be positive: outward normals) and, given ``element_volume`` (the volume of the
+    solid's elements), its relative difference from it, which must stay within
+    ``rel_volume_tol``.
+
+    Parameters
+    ----------
+    points : (n, 3) array_like
+    triangles : (m, 3) int array_like
+    element_volume : float, optional
+    rel_volume_tol : float
+
+    Returns
+    -------
+    report : dict
+        Counts, volumes and ``ok`` (bool).
+
+    Example
+    -------
+    >>> pts = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    >>> r = closed_surface_report(pts, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], 1 / 6)
+    >>> r["ok"], r["boundary_edges"]
+    (True, 0)
+    """
+    import pymeshlab
+
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    tri = np.asarray(triangles, np.int64).reshape(-1, 3)
+    report = mesh_check_report(pts, tri)
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=pts, face_matrix=tri.astype(np.int32)))
+    report["boundary_edges"] = int(ms.get_topological_measures()["boundary_edges"])
+    report["self_intersecting_faces"] = self_intersecting_faces(pts, tri)
+    vol = enclosed_volume(pts, tri)
+    report["enclosed_volume"] = vol
+    report["inward"] = int(not vol > 0)
+    if element_volume is not None:
+        ev = float(element_volume)
+        report["element_volume"] = ev
+        err = abs(vol - ev) / max(abs(ev), 1e-300)
+        report["volume_rel_error"] = err
+        report["volume_mismatch"] = int(not err <= rel_volume_tol)
+    counts = [k for k in report if k not in ("faces", "vertices", "ok", "enclosed_volume",
+                                             "element_volume", "volume_rel_error")]
+    report["ok"] = all(report[k] == 0 for k in counts)
+    return report
+
+
+def check_closed_surface(points, triangles, element_volume=None, what="surface"):
+    """Raise MeshCheckError naming every failed check of :func:`closed_surface_report`;
+    return the report if all pass."""
+    report = closed_surface_report(points, triangles, element_volume)
+    if not report["ok"]:
+        bad = [f"{k}={v}" for k, v in report.items()
+               if k not in ("faces", "vertices", "ok", "enclosed_volume", "element_volume",
+                            "volume_rel_error", "volume_mismatch", "inward") and v]
+        if report.get("inward"):
+            bad.append(f"enclosed volume {report['enclosed_volume']:.6g} (not outward)")
+        if report.get("volume_mismatch"):
+            bad.append(f"encloses {report['enclosed_volume']:.12g}, its elements "
+                       f"{report['element_volume']:.12g} (relative error "
+                       f"{report['volume_rel_error']:.2g})")
+        raise MeshCheckError(f"{what}: failed the closed-surface checks ({', '.join(bad)}); "
+                             "nothing was written")
+    return report

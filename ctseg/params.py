@@ -67,11 +67,11 @@ class SiteParams(_Group):
                        choices=("ward", "random", "density_random"), vtk="Initialization")
     seed: int = _param(0, "int", "seed of the random initialisations", low=0,
                        high=2 ** 31 - 1, cli="--seed")
-    voxels_per_site: float = _param(256.0, "float", "voxels per site in 3D mode when n_sites is "
+    voxels_per_site: float = _param(180.0, "float", "voxels per site in 3D mode when n_sites is "
                                     "auto (at least 64 sites, at most one per voxel)",
                                     "voxels", low=1.0, high=1e9)
-    ward_block_px: int = _param(AUTO, "int", "Ward pre-merge block side (1 = exact Ward); "
-                                "auto = about 16 blocks per site", "px", low=1, high=1024,
+    ward_block_px: int = _param(AUTO, "int", "Ward pre-merge block side (1 = exact Ward; in "
+                                "3D along the finest axis); auto = about 16 blocks per site", "px", low=1, high=1024,
                                 auto=True, vtk="WardBlockPixels")
 
 
@@ -80,7 +80,8 @@ class CVTParams(_Group):
     """Lloyd's iterations of the pixel CVT (SPEC 3)."""
 
     group = "cvt"
-    tol_px: float = _param(0.01, "float", "Lloyd stops when no site moves more than this",
+    tol_px: float = _param(0.01, "float", "Lloyd stops when no site moves more than this "
+                           "(in 3D: times the smallest spacing)",
                            "px", low=0.0, high=10.0, low_open=True, vtk="Tolerance")
     max_iter: int = _param(200, "int", "Lloyd iteration cap", low=1, high=100_000,
                            vtk="MaximumIterations")

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import MeshCheckError
-from .graph import connected_pieces
+from .graph import connected_pieces, neighbour_lists
 from .tetrahedra import tetra_volumes
 
 MAX_RELABEL_ROUNDS = 50
@@ -151,13 +151,71 @@ def pinched_edges(mesh, material, k):
     return uniq[counts != 2]
 
 
+class _EdgeStars:
+    """The tetrahedra around each mesh edge, the faces between them and the box faces
+    holding the edge (all fixed by the mesh, cached per edge), for local recounts of the
+    surface triangles at an edge as materials change."""
+
+    def __init__(self, mesh):
+        tets = mesh.tetrahedra
+        order = np.argsort(tets.ravel(), kind="stable")
+        self.start = np.searchsorted(tets.ravel()[order], np.arange(len(mesh.points) + 1))
+        self.owner = order // 4
+        self.tets = tets
+        self.boundary = {}
+        for f, t in zip(mesh.boundary_faces, mesh.boundary_owner):
+            self.boundary.setdefault(int(t), []).append(frozenset(f.tolist()))
+        self.cache = {}
+
+    def around(self, a, b):
+        return self.star(a, b)[0]
+
+    def star(self, a, b):
+        key = (a, b) if a < b else (b, a)
+        hit = self.cache.get(key)
+        if hit is None:
+            ta = self.owner[self.start[a]:self.start[a + 1]]
+            tb = self.owner[self.start[b]:self.start[b + 1]]
+            around = np.intersect1d(ta, tb)
+            verts = [set(self.tets[t].tolist()) for t in around]
+            pairs = [(int(around[i]), int(around[j])) for i in range(len(around))
+                     for j in range(i + 1, len(around)) if len(verts[i] & verts[j]) == 3]
+            on_box = [int(t) for t in around for f in self.boundary.get(int(t), ())
+                      if a in f and b in f]
+            hit = self.cache[key] = (around, pairs, on_box)
+        return hit
+
+    def triangle_counts(self, a, b, mat):
+        """{material: surface triangles of that material holding edge (a, b)}."""
+        _, pairs, on_box = self.star(a, b)
+        counts = {}
+        for s, t in pairs:
+            ms, mt = mat[s], mat[t]
+            if ms != mt:
+                counts[ms] = counts.get(ms, 0) + 1
+                counts[mt] = counts.get(mt, 0) + 1
+        for t in on_box:
+            counts[mat[t]] = counts.get(mat[t], 0) + 1
+        return counts
+
+    def pinched(self, a, b, mat):
+        return any(c > 2 for c in self.triangle_counts(a, b, mat).values())
+
+
+_TET_EDGES = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
+
+
 def repair_pinched_edges(mesh, material, volume):
     """Relabel a few tetrahedra so that no material's surface has an edge with more than
     two triangles (two pieces of a material, or of its surroundings, touching along an
     edge: the one configuration a vertex copy per fan cannot make manifold).
 
-    The tetrahedra around such an edge all take the material holding most of their
-    volume, so no surface runs along that edge any more; repeated until none is left.
+    A tetrahedron's material decides the surfaces at its own six edges only, so each move
+    is judged exactly by recounting those: for a pinched edge, every tetrahedron around it
+    is tried with each material of its face neighbours, and the move that removes the most
+    pinched edges among its six (ties: the smallest tetrahedron) is made; if none removes
+    any, all tetrahedra around the edge take the material holding most of their volume.
+    Repeated until no pinched edge is left.
 
     Parameters
     ----------
@@ -176,20 +234,49 @@ def repair_pinched_edges(mesh, material, volume):
     Raises
     ------
     MeshCheckError
-        Pinched edges left after :data:`MAX_RELABEL_ROUNDS` rounds.
+        Pinched edges left after :data:`MAX_RELABEL_ROUNDS` passes.
     """
     mat = np.array(material, np.int64)
     vol = np.asarray(volume, float)
-    tets = mesh.tetrahedra
     before = mat.copy()
+    stars = _EdgeStars(mesh)
+    tets = mesh.tetrahedra
+    nb_start, nb = neighbour_lists(mesh.adjacency, len(mat))
+
+    def edges_of(t):
+        return [tuple(sorted((int(tets[t, i]), int(tets[t, j])))) for i, j in _TET_EDGES]
+
+    def n_pinched(edges):
+        return sum(stars.pinched(u, v, mat) for u, v in edges)
+
+    todo = sorted({tuple(e) for k in np.unique(mat) for e in pinched_edges(mesh, mat, k)})
     for _ in range(MAX_RELABEL_ROUNDS):
-        edges = [pinched_edges(mesh, mat, k) for k in np.unique(mat)]
-        edges = np.unique(np.concatenate(edges), axis=0) if edges else np.zeros((0, 2), np.int64)
-        if len(edges) == 0:
+        if not todo:
             return mat, int(np.sum(mat != before))
-        for a, b in edges:
-            around = np.flatnonzero(np.any(tets == a, axis=1) & np.any(tets == b, axis=1))
-            share = np.bincount(mat[around], vol[around])
-            mat[around] = int(np.argmax(share))
-    raise MeshCheckError(f"surfaces: pinched edges left after {MAX_RELABEL_ROUNDS} rounds "
+        touched = set()
+        for a, b in todo:
+            if not stars.pinched(a, b, mat):
+                continue
+            around = stars.around(a, b)
+            best = None
+            for t in around:
+                edges = edges_of(t)
+                old, was = mat[t], n_pinched(edges)
+                for m in set(mat[nb[nb_start[t]:nb_start[t + 1]]].tolist()) - {old}:
+                    mat[t] = m
+                    score = (n_pinched(edges) - was, vol[t], int(t), m)
+                    mat[t] = old
+                    best = score if best is None or score < best else best
+            if best is not None and best[0] < 0:
+                mat[best[2]] = best[3]
+                touched.update(edges_of(best[2]))
+            else:
+                # no single tetrahedron helps: the whole star of the edge takes the
+                # material holding most of its volume
+                share = np.bincount(mat[around], vol[around])
+                mat[around] = int(np.argmax(share))
+                for t in around:
+                    touched.update(edges_of(t))
+        todo = sorted(e for e in touched | set(todo) if stars.pinched(e[0], e[1], mat))
+    raise MeshCheckError(f"surfaces: pinched edges left after {MAX_RELABEL_ROUNDS} passes "
                          "of relabelling")

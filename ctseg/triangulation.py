@@ -98,6 +98,13 @@ def delaunay_mesh(sites, rel_area_tol=1e-12):
     ----------
     Yang et al. 2014, section 5.4 (the paper uses CGAL; Qhull gives the same triangulation
     up to the choice among co-circular configurations).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> mesh = delaunay_mesh(np.array([[0, 0], [4, 0], [0, 3], [4, 3], [2, 1.5]], float))
+    >>> len(mesh.triangles), float(triangle_areas(mesh.points, mesh.triangles).sum())
+    (4, 12.0)
     """
     pts = np.asarray(sites, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3:

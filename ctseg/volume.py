@@ -14,6 +14,7 @@ from .levels import LEVEL_SAMPLE_VOXELS, volume_levels
 from .params import AUTO, resolve
 from .checkpoint import Checkpoint
 from .pipeline import segment_image
+from .pipeline3d import segment_volume_3d
 from .raster import volume_labels  # noqa: F401  (transitional: callers move to ctseg.raster)
 from .resources import (LEVEL_BYTES_PER_VOXEL, RESULT_BYTES_PER_VOXEL, check_memory,
                         slice_bytes)
@@ -126,8 +127,8 @@ def _slice_result(get, k):
         raise type(exc)(f"slice {k}: {exc}") from exc
 
 
-def segment_volume(volume, params=None, *, client=None, progress=None, keep_maps=(),
-                   checkpoint=None, **overrides):
+def segment_volume(volume, params=None, *, spacing=None, client=None, progress=None,
+                   keep_maps=(), checkpoint=None, **overrides):
     """Segment a 3D volume slice by slice into triangle meshes with one numbering of the
     materials for the whole volume.
 
@@ -153,6 +154,9 @@ def segment_volume(volume, params=None, *, client=None, progress=None, keep_maps
         ``progress(fraction_done, message)`` after each slice.
     keep_maps : iterable of int
         Slices whose density and CVT maps are kept (for a figure); the others drop them.
+    spacing : (3,) array_like, optional
+        Voxel size along x, y, z (default 1); used by the 3D mode, whose distances and
+        volumes are physical.
     checkpoint : str or path-like, optional
         A folder where every finished slice is saved at once; slices already there, from
         a run on the same volume with the same parameters, are loaded instead of being
@@ -161,7 +165,8 @@ def segment_volume(volume, params=None, *, client=None, progress=None, keep_maps
 
     Returns
     -------
-    VolumeSegmentation
+    VolumeSegmentation, or ctseg.pipeline3d.TetraSegmentation with ``mode='3d'``
+        (:func:`ctseg.pipeline3d.segment_volume_3d`: tetrahedra and closed surfaces).
 
     Raises
     ------
@@ -180,6 +185,8 @@ def segment_volume(volume, params=None, *, client=None, progress=None, keep_maps
     if "axis" in overrides and not isinstance(overrides["axis"], str):
         overrides["axis"] = "zyx"[slice_axis(overrides["axis"])]
     p = resolve(params, **overrides)
+    if p.mode == "3d":
+        return segment_volume_3d(volume, p, spacing=spacing, progress=progress)
     vol = as_volume(volume)
     ax = slice_axis(p.axis)
     n_jobs = (os.cpu_count() or 1) if p.n_jobs == AUTO else p.n_jobs
@@ -257,8 +264,8 @@ def segment_volume(volume, params=None, *, client=None, progress=None, keep_maps
                               diagnostics=diagnostics)
 
 
-def segment_array(array, params=None, *, progress=None, client=None, keep_maps=(),
-                  checkpoint=None, **overrides):
+def segment_array(array, params=None, *, spacing=None, progress=None, client=None,
+                  keep_maps=(), checkpoint=None, **overrides):
     """Segment a slice or a volume: :func:`ctseg.segment_image` for a 2D array,
     :func:`segment_volume` for a 3D one (the one dispatch the command line, the VTK filter
     and the Slicer module share).
@@ -266,7 +273,7 @@ def segment_array(array, params=None, *, progress=None, client=None, keep_maps=(
     Parameters
     ----------
     array : (rows, cols) or (nz, ny, nx) array_like
-    params, progress, overrides
+    params, spacing, progress, overrides
         As in :func:`segment_volume`.
     client, keep_maps, checkpoint
         Volumes only, as in :func:`segment_volume`.
@@ -285,5 +292,5 @@ def segment_array(array, params=None, *, progress=None, client=None, keep_maps=(
     arr = np.asarray(array)
     if arr.ndim == 2:
         return segment_image(arr, params, progress=progress, **overrides)
-    return segment_volume(arr, params, client=client, progress=progress, keep_maps=keep_maps,
-                          checkpoint=checkpoint, **overrides)
+    return segment_volume(arr, params, spacing=spacing, client=client, progress=progress,
+                          keep_maps=keep_maps, checkpoint=checkpoint, **overrides)

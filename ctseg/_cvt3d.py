@@ -1,0 +1,256 @@
+"""Compiled kernels (numba) of :mod:`ctseg.cvt3d`: the exact nearest-site search on a 3D
+site grid, the voxel assignment kept up to date by Hamerly-style bounds on the two
+nearest sites, and the per-region sums.
+
+Voxel (k, j, i) is the point (i sx, j sy, k sz); flat index (k ny + j) nx + i. Private:
+:func:`ctseg.cvt3d.lloyd_cvt_3d` is the entry point.
+"""
+import numpy as np
+from numba import njit
+
+from ._cvt import _block_margin
+
+_REACH = 1
+"""Cells: the drift of the sites that started this near a voxel's cell lowers its bound
+on the other sites; a farther site counts as the block's margin less the largest drift.
+A small block keeps that bound local: fewer voxels are searched again."""
+
+
+@njit(cache=True)
+def _nearest_many_3d(points, sites):
+    """Index of the nearest site of each point (ties to the lower index); coordinates >= 0."""
+    ext = np.empty(3)
+    for a in range(3):
+        ext[a] = sites[:, a].max()
+        if points.shape[0]:
+            ext[a] = max(ext[a], points[:, a].max())
+    h, gx, gy, gz, start, items = _site_grid_3d(sites, ext[0], ext[1], ext[2])
+    out = np.empty(points.shape[0], np.int64)
+    for i in range(points.shape[0]):
+        out[i] = _three_nearest_3d(points[i, 0], points[i, 1], points[i, 2], sites, h, gx, gy,
+                                   gz, start, items)[0]
+    return out
+
+
+@njit(cache=True)
+def _site_grid_3d(sites, width, height, depth):
+    """Bucket the sites into a uniform grid of cubic cells, about one site per cell."""
+    n = sites.shape[0]
+    tiny = 1e-12 * max(max(width, height), max(depth, 1e-300))
+    h = max(np.cbrt(max(width, tiny) * max(height, tiny) * max(depth, tiny) / n), 1e-300)
+    while (int(width / h) + 1) * (int(height / h) + 1) * (int(depth / h) + 1) > 4 * n + 64:
+        h *= 1.25  # a flat or thin box: keep the cell count near the site count
+    gx = int(width / h) + 1
+    gy = int(height / h) + 1
+    gz = int(depth / h) + 1
+    cell = np.empty(n, np.int64)
+    for k in range(n):
+        cx = min(max(int(sites[k, 0] / h), 0), gx - 1)
+        cy = min(max(int(sites[k, 1] / h), 0), gy - 1)
+        cz = min(max(int(sites[k, 2] / h), 0), gz - 1)
+        cell[k] = (cz * gy + cy) * gx + cx
+    nc = gx * gy * gz
+    start = np.zeros(nc + 1, np.int64)
+    for k in range(n):
+        start[cell[k] + 1] += 1
+    for c in range(nc):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    items = np.empty(n, np.int64)
+    for k in range(n):  # ascending k within each cell
+        items[fill[cell[k]]] = k
+        fill[cell[k]] += 1
+    return h, gx, gy, gz, start, items
+
+
+@njit(cache=True)
+def _three_nearest_3d(x, y, z, sites, h, gx, gy, gz, start, items):
+    """Nearest and second-nearest site of (x, y, z), their distances, and the distance of
+    the third nearest (inf if there are only two sites), exactly.
+
+    Ties go to the lower site index. Cells are visited in cubic shells around the point's
+    cell until the shell's inner distance exceeds the third-best distance.
+    """
+    cx = min(max(int(x / h), 0), gx - 1)
+    cy = min(max(int(y / h), 0), gy - 1)
+    cz = min(max(int(z / h), 0), gz - 1)
+    b1 = np.inf
+    b2 = np.inf
+    b3 = np.inf
+    i1 = -1
+    i2 = -1
+    i3 = -1
+    r = 0
+    while True:
+        for zz in range(max(cz - r, 0), min(cz + r, gz - 1) + 1):
+            z_edge = zz == cz - r or zz == cz + r
+            for yy in range(max(cy - r, 0), min(cy + r, gy - 1) + 1):
+                full = z_edge or yy == cy - r or yy == cy + r
+                step = 1 if full else 2 * r
+                xx = cx - r
+                while xx <= cx + r:
+                    if 0 <= xx < gx:
+                        c = (zz * gy + yy) * gx + xx
+                        for t in range(start[c], start[c + 1]):
+                            k = items[t]
+                            dx = sites[k, 0] - x
+                            dy = sites[k, 1] - y
+                            dz = sites[k, 2] - z
+                            d = dx * dx + dy * dy + dz * dz
+                            if d < b1 or (d == b1 and k < i1):
+                                b3, i3 = b2, i2
+                                b2, i2 = b1, i1
+                                b1, i1 = d, k
+                            elif d < b2 or (d == b2 and k < i2):
+                                b3, i3 = b2, i2
+                                b2, i2 = d, k
+                            elif d < b3 or (d == b3 and k < i3):
+                                b3, i3 = d, k
+                    xx += step
+        m = min(_block_margin(x, cx, r, h, gx), _block_margin(y, cy, r, h, gy),
+                _block_margin(z, cz, r, h, gz))
+        if m == np.inf or (i3 >= 0 and m > 0 and m * m >= b3):
+            break
+        r += 1
+    return i1, np.sqrt(b1), i2, np.sqrt(b2), np.sqrt(b3)
+
+
+@njit(cache=True)
+def _assign_3d(nz, ny, nx, sx, sy, sz, sites, labels, second, u, l2, l3):
+    """Exact nearest site (labels, distance u), second nearest (second, distance l2) and
+    third-nearest distance (l3) of every voxel centre."""
+    h, gx, gy, gz, start, items = _site_grid_3d(sites, (nx - 1) * sx, (ny - 1) * sy,
+                                                (nz - 1) * sz)
+    for k in range(nz):
+        for j in range(ny):
+            for i in range(nx):
+                v = (k * ny + j) * nx + i
+                i1, d1, i2, d2, d3 = _three_nearest_3d(i * sx, j * sy, k * sz, sites, h, gx, gy,
+                                                       gz, start, items)
+                labels[v] = i1
+                second[v] = i2
+                u[v] = d1
+                l2[v] = d2
+                l3[v] = d3
+
+
+@njit(cache=True)
+def _region_sums_3d(labels, w, n, nz, ny, nx, sx, sy, sz, centre):
+    """Per region: weight W, weighted sums of (p - centre) and Q = sum w |p - centre|^2."""
+    sums = np.zeros((5, n))
+    for k in range(nz):
+        dz = k * sz - centre[2]
+        for j in range(ny):
+            dy = j * sy - centre[1]
+            for i in range(nx):
+                v = (k * ny + j) * nx + i
+                r = labels[v]
+                wi = w[v]
+                dx = i * sx - centre[0]
+                sums[0, r] += wi
+                sums[1, r] += wi * dx
+                sums[2, r] += wi * dy
+                sums[3, r] += wi * dz
+                sums[4, r] += wi * (dx * dx + dy * dy + dz * dz)
+    return sums
+
+
+@njit(cache=True)
+def _local_drift_3d(old_sites, drift, h, gx, gy, gz, reach):
+    """Per grid cell: the largest drift among the sites that started within `reach` cells
+    of it (Chebyshev)."""
+    nc = gx * gy * gz
+    top = np.zeros(nc)
+    for k in range(old_sites.shape[0]):
+        cx = min(max(int(old_sites[k, 0] / h), 0), gx - 1)
+        cy = min(max(int(old_sites[k, 1] / h), 0), gy - 1)
+        cz = min(max(int(old_sites[k, 2] / h), 0), gz - 1)
+        c = (cz * gy + cy) * gx + cx
+        top[c] = max(top[c], drift[k])
+    out = np.zeros(nc)
+    for cz in range(gz):
+        for cy in range(gy):
+            for cx in range(gx):
+                m = 0.0
+                for zz in range(max(cz - reach, 0), min(cz + reach + 1, gz)):
+                    for yy in range(max(cy - reach, 0), min(cy + reach + 1, gy)):
+                        for xx in range(max(cx - reach, 0), min(cx + reach + 1, gx)):
+                            m = max(m, top[(zz * gy + yy) * gx + xx])
+                out[(cz * gy + cy) * gx + cx] = m
+    return out
+
+
+@njit(cache=True)
+def _reach_margin_3d(size, s, h, g, reach):
+    """:func:`_block_margin` and the grid cell of every voxel coordinate along one axis."""
+    out = np.empty(size)
+    cell = np.empty(size, np.int64)
+    for i in range(size):
+        cell[i] = min(int(i * s / h), g - 1)
+        out[i] = _block_margin(i * s, cell[i], reach, h, g)
+    return out, cell
+
+
+@njit(cache=True)
+def _reassign_3d(nz, ny, nx, sx, sy, sz, old_sites, sites, drift, labels, second, u, l2, l3):
+    """Bounds after the sites moved by `drift`: re-find only voxels whose bounds fail.
+
+    Per voxel: its nearest site (labels) with u >= its distance, a second site (second)
+    with l2 <= its distance, and l3 <= the distance of every other site. u grows by the own
+    site's drift, l2 shrinks by the second's. A site that started within _REACH grid cells
+    of the voxel's cell came at most the largest drift among those sites closer; any other
+    site is at least the block's margin minus the largest drift overall away: l3 shrinks
+    by the smaller of the two. Where u >= min(l2, l3), the two sites' distances are
+    computed: if the nearer of them is nearer than l3 it is the nearest (the two may swap:
+    a voxel near the bisector of its two nearest sites needs no search); else the voxel is
+    searched again. Equality counts as a failed bound, so that an exact tie always goes to
+    the lower site index, as a search would give it. Returns the number of voxels
+    searched.
+    """
+    h, gx, gy, gz, start, items = _site_grid_3d(sites, (nx - 1) * sx, (ny - 1) * sy,
+                                                (nz - 1) * sz)
+    b1 = _local_drift_3d(old_sites, drift, h, gx, gy, gz, _REACH)
+    far = drift.max()
+    mx, cell_x = _reach_margin_3d(nx, sx, h, gx, _REACH)
+    my, cell_y = _reach_margin_3d(ny, sy, h, gy, _REACH)
+    mz, cell_z = _reach_margin_3d(nz, sz, h, gz, _REACH)
+    searched = 0
+    for k in range(nz):
+        z = k * sz
+        for j in range(ny):
+            y = j * sy
+            row_cell = (cell_z[k] * gy + cell_y[j]) * gx
+            myz = min(my[j], mz[k])
+            for i in range(nx):
+                v = (k * ny + j) * nx + i
+                c = row_cell + cell_x[i]
+                s1 = labels[v]
+                s2 = second[v]
+                ui = u[v] + drift[s1]
+                li2 = l2[v] - drift[s2]
+                li3 = min(l3[v] - b1[c], min(mx[i], myz) - far)
+                if ui >= li2 or ui >= li3:  # equality: a tie, which the lower index wins
+                    x = i * sx
+                    ui = _dist(sites, s1, x, y, z)
+                    li2 = _dist(sites, s2, x, y, z)
+                    if li2 < ui or (li2 == ui and s2 < s1):
+                        s1, s2 = s2, s1
+                        ui, li2 = li2, ui
+                    if ui >= li3:
+                        s1, ui, s2, li2, li3 = _three_nearest_3d(x, y, z, sites, h, gx, gy, gz,
+                                                                 start, items)
+                        searched += 1
+                    labels[v] = s1
+                    second[v] = s2
+                u[v] = ui
+                l2[v] = li2
+                l3[v] = li3
+    return searched
+
+
+@njit(cache=True)
+def _dist(sites, k, x, y, z):
+    dx = sites[k, 0] - x
+    dy = sites[k, 1] - y
+    dz = sites[k, 2] - z
+    return np.sqrt(dx * dx + dy * dy + dz * dz)

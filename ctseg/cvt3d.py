@@ -1,0 +1,321 @@
+"""3D stage 3 (SPEC 9.3): centroidal Voronoi tessellation of the voxels by Lloyd iterations,
+in physical units, with corner, edge and face sites that keep the box covered."""
+from dataclasses import dataclass, field
+from itertools import product
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ._cvt3d import _assign_3d, _reassign_3d, _region_sums_3d
+from .density import check_spacing
+from .errors import InputError, ParameterError
+from .params import DEFAULTS, check
+
+FREE, FACE, EDGE, CORNER = 0, 1, 2, 3
+SITE_CLASSES = ("free", "face", "edge", "corner")
+"""Names of the site classes, indexed by :attr:`CVT3DResult.site_class`."""
+
+_COINCIDENT_VOXELS = 1e-6
+"""Sites closer than this (times the smallest spacing) to another site are dropped after
+the iterations."""
+_MARGIN_VOXELS = 1e-6
+"""Face and edge sites stay this far (times the smallest spacing) inside their face or
+edge, off the lines and corners of lower dimension."""
+
+
+@dataclass
+class CVT3DResult:
+    """Outcome of :func:`lloyd_cvt_3d`.
+
+    Attributes
+    ----------
+    sites : (n', 3) ndarray
+        Final sites (x, y, z), physical; usually n' > n (face and edge sites added).
+    labels : (nz, ny, nx) int ndarray
+        Index of each voxel's nearest final site (its Voronoi region).
+    energy : list of float
+        CVT energy F = sum rho |c - site|^2 x voxel volume of the starting sites (after
+        the corners were pinned and the border sites added) and after every iteration;
+        non-increasing.
+    n_iter : int
+        Lloyd iterations run.
+    converged : bool
+        True if the largest site move fell below ``tol_px`` voxels.
+    empty_regions : int
+        Number of (iteration, site) events where a region had no voxel and its site stayed.
+    site_class : (n',) int8 ndarray
+        0 free, 1 face, 2 edge, 3 corner (:data:`SITE_CLASSES`).
+    site_feature : (n',) int ndarray
+        Which face (``2 axis + side``, axis 0..2 = x, y, z, side 0 at 0, 1 at the far end),
+        edge (``4 axis + 2 side_b + side_c`` with ``axis`` the edge's direction and b < c
+        the other two axes) or corner (``side_x + 2 side_y + 4 side_z``); -1 for free sites.
+    """
+
+    sites: np.ndarray
+    labels: np.ndarray
+    energy: list = field(default_factory=list)
+    n_iter: int = 0
+    converged: bool = False
+    empty_regions: int = 0
+    site_class: np.ndarray = None
+    site_feature: np.ndarray = None
+
+
+def _features(n_xyz, sp):
+    """Faces and edges of the box: their interior voxels (flat indices), the voxels'
+    physical coordinates, and the fixed axes with their values.
+
+    Returns ``{FACE: [...], EDGE: [...]}``, each a list in feature-number order of
+    ``(idx, coords (m, 3), fixed_axes, fixed_values)``.
+    """
+    nx, ny, _ = n_xyz
+    hi = (np.array(n_xyz) - 1) * sp
+    out = {FACE: [], EDGE: []}
+    for kind, n_fixed in ((FACE, 1), (EDGE, 2)):
+        for axis in range(3):
+            fixed = [axis] if kind == FACE else [b for b in range(3) if b != axis]
+            for sides in product((0, 1), repeat=n_fixed):
+                ranges = [np.arange(1, n - 1) for n in n_xyz]
+                for b, side in zip(fixed, sides):
+                    ranges[b] = np.array([side * (n_xyz[b] - 1)])
+                ii, jj, kk = (g.ravel() for g in np.meshgrid(*ranges, indexing="ij"))
+                order = np.argsort((kk * ny + jj) * nx + ii, kind="stable")
+                ijk = np.column_stack([ii, jj, kk])[order]
+                idx = (ijk[:, 2] * ny + ijk[:, 1]) * nx + ijk[:, 0]
+                coords = ijk * sp
+                values = [side * hi[b] for b, side in zip(fixed, sides)]
+                out[kind].append((idx, coords, fixed, values))
+    return out
+
+
+def _barycentres(features, labels, w, n):
+    """Per feature: each region's rho weight on it (n,) and the rho-weighted barycentre of
+    its voxels there (n, 3), exactly on the feature's plane or line."""
+    result = []
+    for idx, coords, fixed, values in features:
+        lab = labels[idx]
+        wl = w[idx]
+        bw = np.bincount(lab, wl, n)
+        safe = np.where(bw > 0, bw, 1.0)
+        bary = np.column_stack([np.bincount(lab, wl * coords[:, a], n) / safe for a in range(3)])
+        for b, v in zip(fixed, values):
+            bary[:, b] = v
+        result.append((bw, bary))
+    return result
+
+
+def _check(rho, sites, spacing, tol_px, max_iter):
+    rho = np.asarray(rho, dtype=np.float64)
+    if (rho.ndim != 3 or min(rho.shape) < 2 or not np.all(np.isfinite(rho))
+            or rho.min() <= 0):
+        raise InputError("density: expected a finite 3D array (nz, ny, nx), every side >= 2, "
+                         "of values > 0")
+    sp = check_spacing(spacing)
+    tol_px = check("tol_px", tol_px)
+    max_iter = check("max_iter", max_iter)
+    sites = np.asarray(sites, dtype=np.float64)
+    if sites.ndim != 2 or sites.shape[1] != 3:
+        raise InputError(f"sites: expected shape (n, 3), got {sites.shape}")
+    n = len(sites)
+    if n < 8:
+        raise ParameterError(f"n_sites: need at least 8 sites (the box corners), got {n}")
+    if n > rho.size:
+        raise ParameterError(f"n_sites: {n} sites exceed the {rho.size} voxels of the volume")
+    hi = (np.array(rho.shape[::-1]) - 1) * sp
+    if not np.all(np.isfinite(sites)) or np.any(sites < 0) or np.any(sites > hi):
+        raise InputError(f"sites: every site must lie inside the box [0, {hi[0]:g}] x "
+                         f"[0, {hi[1]:g}] x [0, {hi[2]:g}] (physical units)")
+    if len(np.unique(sites, axis=0)) != n:
+        raise InputError("sites: two sites coincide")
+    return rho, sites, sp, hi, tol_px, max_iter
+
+
+def _start(sites, labels_of, hi, feats, w):
+    """Pin the corners, classify the starting sites and add the face and edge sites."""
+    corners = np.array([[sx * hi[0], sy * hi[1], sz * hi[2]]
+                        for sz, sy, sx in product((0, 1), repeat=3)])
+    sites = sites.copy()
+    n = len(sites)
+    cls = np.full(n, FREE, np.int8)
+    feat = np.full(n, -1, np.int64)
+    for c, corner in enumerate(corners):
+        d = np.sum((sites - corner) ** 2, axis=1)
+        d[cls == CORNER] = np.inf
+        k = int(np.argmin(d))
+        sites[k], cls[k], feat[k] = corner, CORNER, c
+    labels = labels_of(sites)
+    new_sites, new_feat, new_cls = [], [], []
+    taken = {tuple(p) for p in sites}
+    for kind in (EDGE, FACE):  # a site on an edge line is an edge site, not a face site
+        bary = _barycentres(feats[kind], labels, w, n)
+        for f, ((_, _, fixed, values), (bw, b)) in enumerate(zip(feats[kind], bary)):
+            on = np.all(sites[:, fixed] == values, axis=1)  # on the closed face or edge
+            mine = on & (cls == FREE) & (bw > 0)
+            sites[mine], cls[mine], feat[mine] = b[mine], kind, f
+            add = (bw > 0) & ~on
+            if not add.any() and not np.any((cls == kind) & (feat == f)) and bw.max() > 0:
+                add = np.arange(n) == np.argmax(bw)  # only corners or edges reach it
+            for k in np.flatnonzero(add):
+                p = tuple(b[k])
+                if p not in taken:
+                    taken.add(p)
+                    new_sites.append(b[k])
+                    new_cls.append(kind)
+                    new_feat.append(f)
+    if new_sites:
+        sites = np.vstack([sites, new_sites])
+        cls = np.concatenate([cls, np.array(new_cls, np.int8)])
+        feat = np.concatenate([feat, new_feat])
+    if len(np.unique(sites, axis=0)) != len(sites):
+        raise InputError("sites: two starting sites coincide after snapping to the box faces")
+    return np.ascontiguousarray(sites), cls, feat
+
+
+def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
+                 max_iter=DEFAULTS.max_iter, progress=None):
+    """Lloyd iterations of the voxel CVT, in physical units, with box-keeping site classes.
+
+    Each voxel belongs to the region of its nearest site (physical Euclidean distance from
+    the voxel centre (i sx, j sy, k sz); ties to the lower site index). Site classes are
+    fixed at the start, by the box ``[0, (nx-1) sx] x [0, (ny-1) sy] x [0, (nz-1) sz]``:
+
+    - corner: the site nearest each of the 8 corner voxel centres is moved onto it, and
+      stays there;
+    - edge: moves along its edge line (one of 12); face: moves within its face plane (one
+      of 6), at least 1e-6 voxels off the edges. The site goes to the rho-weighted
+      barycentre of its region's voxels on that edge or face (the 3D eq. 6) when that does
+      not raise its region's energy ``W |x - m|^2`` above the current site's, else to the
+      constrained minimiser, the region's centroid m projected onto the line or plane and
+      clipped into it;
+    - free: the rho-weighted centroid of its region (eq. 5).
+
+    Before the first iteration, after the corners are pinned, a starting site that lies
+    on an edge line (else a face plane) whose interior voxels its region holds becomes
+    that edge's (face's) site, at its barycentre there. Then, as in 2D, border sites are
+    added: every starting region holding interior voxels of an edge or face (corner voxels
+    excluded from edges, edge voxels from faces) whose site is not on that closed edge or
+    face gets a new site of that class at the barycentre of those voxels, and keeps its
+    own site, so a site on a material edge near the box stays on the edge. An edge or face
+    whose interior voxels all belong to sites on it or on its border (corners, say) and
+    that has no site of its own gets one from the region holding the largest weight
+    there. So every face and edge with interior voxels holds sites of its own, and with
+    the 8 corners the Delaunay tetrahedra of the sites cover the box. With fixed classes
+    and exact nearest-site regions the energy ``F = sum rho |c - site|^2 x (sx sy sz)``
+    never increases. A region that lost all its voxels keeps its site (counted in
+    ``empty_regions``). After the iterations a site within 1e-6 voxels of another is
+    removed (a free one first, else the lower class: coincident sites break the Delaunay
+    tetrahedra), and the regions are found again.
+
+    Parameters
+    ----------
+    rho : (nz, ny, nx) array_like
+        Density (> 0), e.g. from :func:`ctseg.density.density_volume`.
+    sites : (n, 3) array_like
+        Starting sites (x, y, z), physical, inside the box, distinct, n >= 8.
+    spacing : (3,) array_like, optional
+        Voxel spacing (sx, sy, sz), each > 0.
+    tol_px : float, optional
+        Stop when the largest site move is below ``tol_px`` times the smallest spacing.
+    max_iter : int, optional
+        Iteration cap.
+    progress : callable, optional
+        Called as ``progress(iteration, max_iter)`` after every iteration.
+
+    Returns
+    -------
+    CVT3DResult
+
+    Raises
+    ------
+    InputError
+        A bad density, or sites outside the box or coincident.
+    ParameterError
+        A bad spacing, tol_px or max_iter, fewer than 8 sites, or more sites than voxels.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from ctseg.sites import ward_sites_3d
+    >>> rho = np.ones((8, 10, 12))
+    >>> r = lloyd_cvt_3d(rho, ward_sites_3d(rho, 20, (1, 1, 2)), spacing=(1, 1, 2))
+    >>> r.labels.shape, r.energy[-1] < r.energy[0], int((r.site_class == CORNER).sum())
+    ((8, 10, 12), True, 8)
+    """
+    rho, sites, sp, hi, tol_px, max_iter = _check(rho, sites, spacing, tol_px, max_iter)
+    nz, ny, nx = rho.shape
+    sx, sy, sz = (float(v) for v in sp)
+    w = np.ascontiguousarray(rho.ravel())
+    feats = _features((nx, ny, nz), sp)
+    labels, second = np.empty(rho.size, np.int64), np.empty(rho.size, np.int64)
+    u, l2, l3 = np.empty(rho.size), np.empty(rho.size), np.empty(rho.size)
+
+    def assign(s):
+        _assign_3d(nz, ny, nx, sx, sy, sz, np.ascontiguousarray(s), labels, second, u, l2, l3)
+        return labels
+
+    sites, cls, feat = _start(sites, assign, hi, feats, w)
+    n = len(sites)
+    assign(sites)
+    centre = hi / 2.0
+    vox = sx * sy * sz
+
+    def energy_of(sums, s):
+        c = s - centre
+        return vox * float(np.sum(sums[4] - 2.0 * np.sum(c * sums[1:4].T, axis=1)
+                                  + np.sum(c * c, axis=1) * sums[0]))
+
+    sums = _region_sums_3d(labels, w, n, nz, ny, nx, sx, sy, sz, centre)
+    energy = [energy_of(sums, sites)]
+    margin = _MARGIN_VOXELS * sp.min()
+    empty_total, converged, it = 0, False, 0
+    for it in range(1, max_iter + 1):
+        empty = sums[0] == 0
+        empty_total += int(empty.sum())
+        m = centre + sums[1:4].T / np.where(empty, 1.0, sums[0])[:, None]
+        new = np.where(empty[:, None], sites, m)  # free: eq. 5; an empty region stays
+        for kind in (FACE, EDGE):
+            bary = _barycentres(feats[kind], labels, w, n)
+            for f, ((_, _, fixed, values), (bw, b)) in enumerate(zip(feats[kind], bary)):
+                sel = np.flatnonzero((cls == kind) & (feat == f) & ~empty)
+                if len(sel) == 0:
+                    continue
+                proj = m[sel].copy()  # constrained minimiser: never raises F
+                free_axes = [a for a in range(3) if a not in fixed]
+                proj[:, free_axes] = np.clip(proj[:, free_axes], margin, hi[free_axes] - margin)
+                proj[:, fixed] = values
+                cur = np.sum((sites[sel] - m[sel]) ** 2, axis=1)
+                e6 = np.sum((b[sel] - m[sel]) ** 2, axis=1)
+                use6 = (bw[sel] > 0) & (e6 <= cur)
+                new[sel] = np.where(use6[:, None], b[sel], proj)
+        new[cls == CORNER] = sites[cls == CORNER]
+        drift = np.sqrt(np.sum((new - sites) ** 2, axis=1))
+        move = float(drift.max())
+        old, sites = sites, np.ascontiguousarray(new)
+        _reassign_3d(nz, ny, nx, sx, sy, sz, old, sites, drift, labels, second, u, l2, l3)
+        sums = _region_sums_3d(labels, w, n, nz, ny, nx, sx, sy, sz, centre)
+        energy.append(energy_of(sums, sites))
+        if progress is not None:
+            progress(it, max_iter)
+        if move < tol_px * sp.min():
+            converged = True
+            break
+    keep = _not_coincident(sites, cls, _COINCIDENT_VOXELS * sp.min())
+    if not keep.all():
+        sites, cls, feat = np.ascontiguousarray(sites[keep]), cls[keep], feat[keep]
+        assign(sites)
+    return CVT3DResult(sites=sites, labels=labels.reshape(rho.shape), energy=energy,
+                       n_iter=it, converged=converged, empty_regions=empty_total,
+                       site_class=cls, site_feature=feat)
+
+
+def _not_coincident(sites, cls, radius):
+    """Mask of the sites to keep: of two within ``radius``, the higher class (corner >
+    edge > face > free) stays, of equal classes the lower index. A free site whose region
+    holds only face voxels has its centroid on the face, where rounding can leave it a
+    hair from a face site; removing it leaves the energy as it was (its voxels are as near
+    the other site)."""
+    keep = np.ones(len(sites), bool)
+    for a, b in cKDTree(sites).query_pairs(radius, output_type="ndarray"):
+        if keep[a] and keep[b]:
+            keep[a if cls[a] < cls[b] else b] = False
+    return keep

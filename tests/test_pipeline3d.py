@@ -1,0 +1,90 @@
+"""The 3D mode end to end (SPEC 9): tetrahedra that fill the box, one material each, closed
+manifold surfaces that enclose exactly their tetrahedra, the materials of the truth."""
+import numpy as np
+import pytest
+
+import ctseg
+from ctseg.errors import InputError, ParameterError
+from ctseg.meshcheck import mesh_check_report
+from ctseg.metrics import dice_per_label
+from ctseg.phantoms import make_volume
+from ctseg.tetra_gray import voxel_overlaps
+from ctseg.tetrahedra import tetra_volumes
+
+
+def tetra_labels(seg, shape):
+    """Each voxel's material: that of the tetrahedron overlapping it most."""
+    t, vox, ov = voxel_overlaps(seg.points, seg.tetrahedra, shape, seg.spacing)
+    order = np.argsort(ov, kind="stable")
+    lab = np.zeros(int(np.prod(shape)), np.int64)
+    lab[vox[order]] = seg.material[t[order]]
+    return lab.reshape(shape)
+
+
+@pytest.fixture(scope="module")
+def part():
+    ph = make_volume(16, 96, seed=3)
+    return ph, ctseg.segment_volume(ph.image, mode="3d", n_sites=3000)
+
+
+def test_tetrahedra_fill_the_box_and_surfaces_close(part):
+    ph, seg = part
+    vol = tetra_volumes(seg.points, seg.tetrahedra)
+    assert vol.min() > 0
+    box = np.prod((np.array(ph.image.shape[::-1]) - 1.0) * seg.spacing)
+    assert abs(vol.sum() - box) <= 1e-9 * box
+    assert len(seg.surfaces) == seg.n_materials
+    for s in seg.surfaces:
+        report = mesh_check_report(s.points, s.triangles)
+        assert report["ok"], report
+        assert abs(s.enclosed_volume - s.element_volume) <= 1e-9 * s.element_volume
+        assert np.isclose(s.element_volume, vol[seg.material == s.material].sum(), rtol=1e-12)
+    # interface triangles separate different materials, lower number first
+    assert np.all(seg.interface_materials[:, 0] < seg.interface_materials[:, 1])
+    d = seg.diagnostics
+    assert d["n_tetrahedra"] == len(seg.tetrahedra) and d["element_quality"]["min_dihedral_deg"] > 0
+    assert np.all(np.diff(d["cvt_energy"]) <= 1e-9 * d["cvt_energy"][0])
+    assert set(d["times_s"]) >= {"density", "initial_sites", "cvt", "tetrahedra", "tetra_gray", "graphcut"}
+
+
+def test_materials_of_the_truth(part):
+    ph, seg = part
+    assert seg.n_materials == 4
+    dice = dice_per_label(tetra_labels(seg, ph.image.shape), ph.truth.astype(np.int64), 4)
+    # air, aluminium and steel; the thin polymer bushing is the hard one (README)
+    assert min(dice[0], dice[2], dice[3]) > 0.9 and dice[1] > 0.5, dice
+    assert np.all(np.diff(seg.material_gray) > 0)
+
+
+def test_anisotropic_spacing_keeps_the_geometry_physical():
+    ph = make_volume(12, 40, seed=1)
+    spacing = (0.1, 0.1, 0.3)
+    seg = ctseg.segment_volume(ph.image, mode="3d", spacing=spacing, n_sites=800)
+    box = (np.array(ph.image.shape[::-1]) - 1.0) * spacing
+    assert np.allclose(seg.points.min(axis=0), 0) and np.allclose(seg.points.max(axis=0), box)
+    assert np.isclose(tetra_volumes(seg.points, seg.tetrahedra).sum(), np.prod(box), rtol=1e-9)
+
+
+def test_deterministic():
+    ph = make_volume(8, 32, seed=3)
+    a = ctseg.segment_volume(ph.image, mode="3d", n_sites=300)
+    b = ctseg.segment_volume(ph.image, mode="3d", n_sites=300)
+    for name in ("points", "tetrahedra", "material", "gray"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+@pytest.mark.parametrize("volume,kw,error,words", [
+    (np.zeros((1, 16, 16)), {}, InputError, "at least 2 voxels"),
+    (np.full((4, 8, 8), np.nan), {}, InputError, "NaN"),
+    (np.zeros((4, 8, 8)), {"spacing": (1, -1, 1)}, ParameterError, "spacing"),
+    (np.zeros((4, 8, 8)), {"n_sites": 10 ** 6}, ParameterError, "n_sites"),
+])
+def test_bad_input(volume, kw, error, words):
+    with pytest.raises(error, match=words):
+        ctseg.segment_volume(volume, mode="3d", **kw)
+
+
+def test_a_constant_volume_is_one_material():
+    seg = ctseg.segment_volume(np.full((6, 10, 10), 3.0), mode="3d", n_sites=80)
+    assert seg.n_materials == 1 and len(seg.interfaces) == 0
+    assert len(seg.surfaces) == 1 and seg.surfaces[0].enclosed_volume > 0
