@@ -88,6 +88,20 @@ class CVTParams(_Group):
 
 
 @dataclass(frozen=True)
+class TetraParams(_Group):
+    """The tetrahedra of the 3D mode (SPEC 9.4): slivers perturbed away for FE use."""
+
+    group = "tetrahedra"
+    sliver_min_dihedral_deg: float = _param(5.0, "float", "tetrahedra with a smaller "
+                                            "dihedral angle are slivers: their vertices "
+                                            "are moved a little and the sites "
+                                            "triangulated again", "deg", low=0.0, high=30.0,
+                                            vtk="SliverMinDihedral")
+    sliver_rounds: int = _param(12, "int", "rounds of sliver perturbation (0 = none)",
+                                low=0, high=1000)
+
+
+@dataclass(frozen=True)
 class LevelParams(_Group):
     """The material gray levels: the gray map onto 0-255 and the modes of the flat pixels
     (SPEC conventions and 7)."""
@@ -201,7 +215,7 @@ class VolumeParams(_Group):
                          vtk="NumberOfJobs", cli="--jobs")
 
 
-GROUPS = (DensityParams, SiteParams, CVTParams, LevelParams, GraphCutParams,
+GROUPS = (DensityParams, SiteParams, CVTParams, TetraParams, LevelParams, GraphCutParams,
           RecursionParams, CorrectionParams, VolumeParams)
 
 RUN_ONLY = ("n_jobs",)
@@ -221,8 +235,8 @@ ALIASES = {
 class SegmentParams:
     """All parameters of a segmentation, by stage.
 
-    Attributes are the stage groups (``density``, ``sites``, ``cvt``, ``levels``,
-    ``graphcut``, ``recursion``, ``corrections``, ``volume``); each parameter is also an
+    Attributes are the stage groups (``density``, ``sites``, ``cvt``, ``tetrahedra``,
+    ``levels``, ``graphcut``, ``recursion``, ``corrections``, ``volume``); each parameter is also an
     attribute of its own name (``params.lam``). Instances are immutable and checked on
     construction: :meth:`replace` makes a changed copy.
 
@@ -236,6 +250,7 @@ class SegmentParams:
     density: DensityParams = field(default_factory=DensityParams)
     sites: SiteParams = field(default_factory=SiteParams)
     cvt: CVTParams = field(default_factory=CVTParams)
+    tetrahedra: TetraParams = field(default_factory=TetraParams)
     levels: LevelParams = field(default_factory=LevelParams)
     graphcut: GraphCutParams = field(default_factory=GraphCutParams)
     recursion: RecursionParams = field(default_factory=RecursionParams)

@@ -19,7 +19,7 @@ from .recursive_cut import order_by_gray, segment_triangles
 from .sites import initial_sites_3d
 from .surfaces import material_interfaces, material_surface, repair_pinched_edges
 from .tetra_gray import tetra_gray
-from .tetrahedra import delaunay_tetrahedra, tetra_quality, tetra_volumes
+from .tetrahedra import perturb_slivers, tetra_quality, tetra_volumes
 
 DENSITY_KEYS = ("density_sigma_px", "density_floor", "density_saturation", "density_ridge")
 
@@ -91,7 +91,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     """Segment a volume into tetrahedra with one material each, and closed surfaces.
 
     density (SPEC 9.1) -> Ward sites on voxel blocks (9.2) -> voxel CVT (9.3) -> Delaunay
-    tetrahedra (9.4) -> exact tetrahedron gray (9.5) -> recursive graph cut on the
+    tetrahedra, slivers perturbed away (9.4, :func:`ctseg.tetrahedra.perturb_slivers`) -> exact tetrahedron gray (9.5) -> recursive graph cut on the
     tetrahedron graph with the levels and rules of 2D (9.6) -> interfaces and closed
     surfaces per material (9.7).
 
@@ -127,6 +127,14 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     so every surface is a closed manifold; ``diagnostics["relabelled_for_manifold"]``
     counts them. With ``blur_correction`` the grays are corrected for the blur the first
     labelling predicts and labelled again, as in 2D (:func:`ctseg.blur.blur_corrected_gray_3d`).
+
+    Two rules differ from 2D because tetrahedra along an edge can be smaller than the
+    blur: an element is interior when most of its voxels are flat (the un-sharpened
+    density below half its range), not when its steps to its neighbours are small (a band
+    of small elements in an edge's blur has small steps between them); and the first
+    labelling, whose blur the correction predicts, leaves out the thin-layer rules (a
+    band of blurred-edge elements with an intermediate gray must not predict a layer of
+    the intermediate material); the second labelling applies them.
 
     Example
     -------
@@ -182,7 +190,8 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
                 max_iter=p.max_iter,
                 progress=lambda it, n: report(0.2 + 0.5 * it / max(n, 1), "cvt"))
     box = (np.array(image.shape[::-1], float) - 1.0) * sp
-    mesh = timed("tetrahedra", 0.7, delaunay_tetrahedra, cvt.sites, box)
+    _, mesh, slivers = timed("tetrahedra", 0.7, perturb_slivers, cvt.sites, box,
+                             p.sliver_min_dihedral_deg, p.sliver_rounds, seed=p.seed)
     gray = timed("tetra_gray", 0.75, tetra_gray, image, mesh.points, mesh.tetrahedra, sp)
     offset, factor = scale
     volume_vox = tetra_volumes(mesh.points, mesh.tetrahedra) / float(np.prod(sp))
@@ -190,8 +199,18 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
 
     cut = {k: getattr(p, k) for k in CUT_KEYS}
     f255 = np.clip((gray - offset) * factor, 0.0, 255.0)
+    # interior: most of the element's voxels are flat (the un-sharpened density below
+    # half its range, as the flat pixels that measure the levels)
+    strength = density_volume(image, sp, density_sigma_px=p.flat_sigma_px,
+                              density_floor=p.density_floor,
+                              density_saturation=p.density_saturation, density_ridge=0.0)
+    flat = (strength - p.density_floor) < 0.5
+    interior = tetra_gray(flat.astype(np.float64), mesh.points, mesh.tetrahedra, sp) >= 0.5
+    cut["interior"] = interior
+    # the first pass without the thin-layer rules: a band of blurred-edge elements with an
+    # intermediate gray must not predict a layer to the blur correction
     seg = timed("graphcut", 0.8, segment_triangles, f255, volume_vox, mesh.adjacency, cent,
-                levels=levels, **cut)
+                levels=levels, thin_layers=not p.blur_correction, **cut)
     blur_px = None
     if p.blur_correction and len(seg.mode_gray) > 1:
         def sharpen():
@@ -238,6 +257,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "blur_px": blur_px,
         "relabelled_for_manifold": int(relabelled),
         "element_quality": quality,
+        "slivers_left": int(slivers),
         "streak_weights": streak_weights,
         "surfaces": [{"material": s.material, "triangles": int(len(s.triangles)),
                       "vertices": int(len(s.points)), "enclosed_volume": s.enclosed_volume,

@@ -181,7 +181,8 @@ def segment_triangles(gray, area, adjacency, centroids, *,
                       min_material_area=DEFAULTS.min_material_area,
                       min_pocket_area=DEFAULTS.min_pocket_area, n_materials=DEFAULTS.n_materials,
                       theta_255=DEFAULTS.theta_255, lam=DEFAULTS.lam, beta=DEFAULTS.beta,
-                      eps_255=DEFAULTS.eps_255, edge_length=None, levels=None):
+                      eps_255=DEFAULTS.eps_255, edge_length=None, levels=None,
+                      thin_layers=True, interior=None):
     """Recursive graph-cut segmentation of an element graph (triangles or tetrahedra) into
     materials.
 
@@ -246,6 +247,14 @@ def segment_triangles(gray, area, adjacency, centroids, *,
         The rules above; ranges and defaults in :mod:`ctseg.params`.
     theta_255, lam, beta, eps_255, edge_length
         Passed to the graph cut (SPEC 6).
+    thin_layers : bool
+        Apply the two thin-layer exceptions of rule 3 (off: every leaf without interior
+        elements is a partial-volume mix; the 3D mode's first pass, whose blur correction
+        then tells a real layer from a blurred edge).
+    interior : (m,) bool array_like, optional
+        Which elements lie inside a material, instead of rule 1's step test (the 3D mode
+        uses the image's flat voxels: its elements can be smaller than the blur, so a
+        band of them along an edge has small steps between them).
     levels : (K,) array_like, optional
         Material gray levels found elsewhere (e.g.
         :func:`ctseg.levels.pixel_material_levels` on the image, which sees far more
@@ -304,7 +313,13 @@ def segment_triangles(gray, area, adjacency, centroids, *,
     cut_params = dict(theta_255=check("theta_255", theta_255), lam=check("lam", lam),
                       beta=check("beta", beta), eps_255=check("eps_255", eps_255))
 
-    interior = interior_triangles(f, adjacency, step_threshold, 0.5 * merge_rel)
+    if interior is None:
+        interior = interior_triangles(f, adjacency, step_threshold, 0.5 * merge_rel)
+    else:
+        interior = np.asarray(interior, bool)
+        if interior.shape != f.shape:
+            raise ParameterError(f"interior: expected one flag per element ({len(f)}), got "
+                                 f"shape {interior.shape}")
     if not interior.any():
         interior = np.ones(len(f), bool)
     sigma = 0.0
@@ -325,7 +340,8 @@ def segment_triangles(gray, area, adjacency, centroids, *,
                                       separation, n_modes=n_materials)
     material, leaf, calls, deepest = _recursive_split(
         f, area, adjacency, centroids, interior, edges, means, min_pocket_area,
-        4.0 * min_material_area, min_triangles, max_depth, cut_params, edge_length)
+        4.0 * min_material_area if thin_layers else np.inf, min_triangles, max_depth,
+        cut_params, edge_length)
     material = partial_volume_elements(f, material, interior, adjacency, means)
     material, mat_gray, used = order_by_gray(material, f, area)
     return MaterialSegmentation(material=material, material_gray=mat_gray,

@@ -11,6 +11,10 @@ from .errors import MeshCheckError
 # up to round-off: four sites on one face of the box, cocircular)
 FLAT_REL = 1e-10
 
+SLIVER_STEP = 0.1
+"""Largest move of a sliver's vertex in :func:`perturb_slivers`, as a share of its
+shortest edge."""
+
 
 @dataclass
 class TetraMesh:
@@ -186,6 +190,80 @@ def delaunay_tetrahedra(sites, box):
     adjacency, shared, bfaces, owner = face_graph(tets)
     return TetraMesh(points=pts, tetrahedra=tets, adjacency=adjacency, shared_faces=shared,
                      boundary_faces=bfaces, boundary_owner=owner)
+
+
+def dihedral_angles(points, tetrahedra):
+    """The six dihedral angles (degrees) of every tetrahedron, (m, 6)."""
+    p = np.asarray(points, float)[np.asarray(tetrahedra, np.int64)]
+    normals = []
+    for f in range(4):
+        a, b, c = (p[:, i] for i in _FACES[f])
+        normals.append(np.cross(b - a, c - a))
+    n = np.stack(normals, axis=1)
+    unit = n / np.maximum(np.linalg.norm(n, axis=2), 1e-300)[:, :, None]
+    out = np.empty((len(p), 6))
+    for e, (f, g) in enumerate(((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))):
+        out[:, e] = np.degrees(np.arccos(np.clip(-np.einsum("ij,ij->i", unit[:, f], unit[:, g]), -1.0, 1.0)))
+    return out
+
+
+def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
+    """Move the vertices of slivers a little and triangulate again, keeping the best.
+
+    Each round, every vertex of a tetrahedron whose smallest dihedral angle is below
+    ``min_dihedral_deg`` moves by a random step of up to :data:`SLIVER_STEP` of its
+    shortest edge,
+    along its free axes only (a site on a box face stays on it, one on an edge on its
+    line, corners stay); the site set whose tetrahedra have the fewest such slivers
+    (ties: the larger smallest angle) is kept. The same sites and seed give the same
+    result.
+
+    Parameters
+    ----------
+    sites : (n, 3) array_like
+    box : (3,) array_like
+    min_dihedral_deg : float
+    rounds : int
+    seed : int
+
+    Returns
+    -------
+    sites : (n, 3) ndarray
+    mesh : TetraMesh
+        Of the sites returned.
+    slivers : int
+        Tetrahedra left below the angle.
+    """
+    box = np.asarray(box, float)
+    best_sites = np.asarray(sites, float)
+    best = delaunay_tetrahedra(best_sites, box)
+    angle = dihedral_angles(best.points, best.tetrahedra).min(axis=1)
+    best_key = (int(np.sum(angle < min_dihedral_deg)), -float(angle.min()))
+    rng = np.random.default_rng(seed)
+    tol = 1e-9 * np.maximum(box, 1.0)
+    for _ in range(rounds):
+        if best_key[0] == 0:
+            break
+        pts = best.points.copy()
+        bad = np.unique(best.tetrahedra[angle < min_dihedral_deg])
+        edges = np.concatenate([best.tetrahedra[:, [i, j]] for i, j in
+                                ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
+        length = np.linalg.norm(pts[edges[:, 0]] - pts[edges[:, 1]], axis=1)
+        shortest = np.full(len(pts), np.inf)
+        np.minimum.at(shortest, edges[:, 0], length)
+        np.minimum.at(shortest, edges[:, 1], length)
+        free = ~((np.abs(pts[bad]) <= tol) | (np.abs(pts[bad] - box) <= tol))
+        step = rng.uniform(-SLIVER_STEP, SLIVER_STEP, (len(bad), 3)) * shortest[bad, None] * free
+        pts[bad] = np.clip(pts[bad] + step, 0.0, box)
+        try:
+            trial = delaunay_tetrahedra(pts, box)
+        except MeshCheckError:
+            continue
+        a = dihedral_angles(trial.points, trial.tetrahedra).min(axis=1)
+        key = (int(np.sum(a < min_dihedral_deg)), -float(a.min()))
+        if key < best_key:
+            best, angle, best_key = trial, a, key
+    return best.points, best, best_key[0]
 
 
 def tetra_quality(points, tetrahedra):

@@ -78,3 +78,22 @@ def test_quality_of_a_regular_and_a_sliver_tetrahedron():
     sliver = [[0, 0, 0], [1, 0, 0], [0.5, 0.5, 0.01], [0.5, -0.5, 0.01]]
     q = tetra_quality(sliver, [[0, 1, 2, 3]])
     assert q["min_dihedral_deg"] < 3 and q["min_radius_ratio"] < 0.1
+
+
+def test_sliver_perturbation_removes_slivers_and_keeps_the_box():
+    from ctseg.tetrahedra import dihedral_angles, perturb_slivers
+
+    sites = _grid_sites(6, 0.08, seed=5)  # near-regular: many slivers
+    box = np.array([6.0, 6.0, 6.0])
+    before = delaunay_tetrahedra(sites, box)
+    n0 = int(np.sum(dihedral_angles(before.points, before.tetrahedra).min(axis=1) < 5))
+    pts, mesh, left = perturb_slivers(sites, box, 5.0, 12, seed=0)
+    angles = dihedral_angles(mesh.points, mesh.tetrahedra).min(axis=1)
+    assert n0 > 10 and left == int(np.sum(angles < 5)) and left < n0 / 4
+    assert np.isclose(tetra_volumes(mesh.points, mesh.tetrahedra).sum(), 216.0, rtol=1e-9)
+    for ax in range(3):  # face, edge and corner sites stay on their planes
+        on = np.isclose(sites[:, ax], 0) | np.isclose(sites[:, ax], 6)
+        np.testing.assert_array_equal(pts[on, ax], sites[on, ax])
+    again, _, _ = perturb_slivers(sites, box, 5.0, 12, seed=0)
+    np.testing.assert_array_equal(again, pts)
+    assert dihedral_angles(*[[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2, 3]]]).shape == (1, 6)
