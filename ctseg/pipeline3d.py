@@ -83,7 +83,8 @@ class TetraSegmentation:
 def _check_spacing(spacing):
     sp = np.asarray([1.0, 1.0, 1.0] if spacing is None else spacing, float).ravel()
     if sp.shape != (3,) or not np.all(np.isfinite(sp)) or np.any(sp <= 0):
-        raise ParameterError(f"spacing: expected three positive finite numbers (x, y, z), got {spacing!r}")
+        raise ParameterError("spacing: expected three positive finite numbers (x, y, z), got "
+                             f"{spacing!r}")
     return sp
 
 
@@ -91,7 +92,8 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     """Segment a volume into tetrahedra with one material each, and closed surfaces.
 
     density (SPEC 9.1) -> Ward sites on voxel blocks (9.2) -> voxel CVT (9.3) -> Delaunay
-    tetrahedra, slivers perturbed away (9.4, :func:`ctseg.tetrahedra.perturb_slivers`) -> exact tetrahedron gray (9.5) -> recursive graph cut on the
+    tetrahedra, slivers perturbed away (9.4, :func:`ctseg.tetrahedra.perturb_slivers`) ->
+    exact tetrahedron gray (9.5) -> recursive graph cut on the
     tetrahedron graph with the levels and rules of 2D (9.6) -> interfaces and closed
     surfaces per material (9.7).
 

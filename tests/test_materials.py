@@ -90,3 +90,24 @@ def test_fragmented_thin_layer_is_one_material_and_small_or_mixed_runs_are_not()
     adjacency = np.array(pairs)
     label_fragmented_layers(area, leaf, leaf_material, adjacency, nearest, in_core, 1000.0, 4)
     assert leaf_material.tolist() == [0, 3, 1, 1, 1, 1, 1, -1, -1, -1, -1, -1, -1]
+
+
+def test_merge_threshold_sets_the_level_separation():
+    """merge_threshold_255 replaces the noise rule: two levels 12 gray apart merge under the
+    rule (5 noise sd of the smoothed pixels + 20% of the gray, about 15 here) and stay
+    apart with a threshold of 6."""
+    import ctseg
+    from ctseg.levels import flat_pixels, pixel_material_levels
+
+    rng = np.random.default_rng(0)
+    img = np.full((96, 96), 40.0)
+    img[:, 32:64] = 52.0
+    img[:, 64:] = 200.0
+    img += rng.normal(0, 3.0, img.shape)
+    flat = flat_pixels(img)
+    assert len(pixel_material_levels(img, flat)[0]) == 2
+    assert len(pixel_material_levels(img, flat, merge_threshold_255=6.0)[0]) == 3
+    # through segment_image (the 0-255 map stretches the gap to about 19): the rule keeps
+    # three materials, a threshold of 40 merges the two darker ones
+    assert ctseg.segment_image(img, n_sites=300).n_materials == 3
+    assert ctseg.segment_image(img, n_sites=300, merge_threshold_255=40.0).n_materials == 2
