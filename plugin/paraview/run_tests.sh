@@ -1,9 +1,7 @@
 #!/usr/bin/env bash
 # Test the ParaView plugin in Debian's ParaView (5.11, VTK 9.2, Python 3.11), headless.
-# Installs ParaView with apt if pvpython is missing (root needed), makes a virtual
-# environment that sees ParaView's Python and holds ctseg with the dependencies ParaView
-# lacks (numpy pinned to Debian's, so Debian's scipy keeps working), then runs
-# test_paraview.py under Xvfb. Usage: plugin/paraview/run_tests.sh [SCREENSHOT.png]
+# Installs ParaView with apt if pvpython is missing (root needed), installs ctseg with the
+# README's script (plugin/paraview/install.sh), then runs test_paraview.py under Xvfb. Usage: plugin/paraview/run_tests.sh [SCREENSHOT.png]
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 if ! command -v pvpython >/dev/null || ! command -v xvfb-run >/dev/null; then
@@ -12,12 +10,8 @@ if ! command -v pvpython >/dev/null || ! command -v xvfb-run >/dev/null; then
         paraview python3-paraview xvfb >/dev/null
 fi
 env=.venv-paraview
-if [ ! -x "$env/bin/python" ]; then
-    /usr/bin/python3 -m venv --system-site-packages "$env"
-fi
-numpy_version=$(/usr/bin/python3 -c 'import numpy; print(numpy.__version__)')
-"$env/bin/pip" install -q "numpy==$numpy_version" numba PyMaxflow pymeshlab pydicom pynrrd tifffile
-"$env/bin/pip" install -q --no-deps --force-reinstall .
+# the README's install step, word for word
+plugin/paraview/install.sh "$env"
 site=$("$env/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
 shot=${1:-$(mktemp -d)/paraview.png}
 PYTHONPATH="$PWD/plugin/paraview/compat:$site" xvfb-run -a pvpython plugin/paraview/test_paraview.py "$shot"
