@@ -12,7 +12,8 @@ from .errors import CTSegError, InputError, ParameterError, ResumeError
 from .params import SPECS, SegmentParams, resolve_name
 
 MESH_HELP = """\
-Segment a CT slice or volume into a triangle mesh with one material per triangle.
+Segment a CT slice or volume into a triangle mesh with one material per triangle, or
+(--mode 3d) a volume into tetrahedra with one material each and closed surfaces.
 
 Pipeline (Yang et al. 2014): gradient density map -> Ward-initialised centroidal Voronoi
 tessellation -> Delaunay triangles -> area-weighted gray per triangle -> recursive graph
@@ -31,6 +32,14 @@ material, colours in NAME.mtl), .mlp (a MeshLab project with one layer per mater
 each a coloured PLY NAME_material<k>.ply). Every mesh passes pymeshlab's checks before it is written,
 and every file is written under a temporary name and renamed: an error or Ctrl-C leaves
 no partial file.
+
+3D mode (--mode 3d, a volume only): the same method on the voxels, with the file's
+spacing. Outputs: .vtu (tetrahedra with 'material' and 'gray'), .vtp (every material's
+closed surface, with 'material'), .stl (one closed STL per material), .ply and .obj (the
+closed surfaces coloured by material); --surfaces OUT.vtp writes the interface triangles
+('material_a', 'material_b', normals from a to b). Every closed surface is checked
+(closed, manifold, outward, not self-intersecting, enclosing its tetrahedra's volume)
+before anything is written.
 
 Parameters: the common ones have options of their own (below); every other one is set
 with --set NAME=VALUE (repeatable; 'auto' for the automatic value where allowed), or all
@@ -55,12 +64,23 @@ def _progress_printer(enabled):
 
 
 def _check_outputs(args):
-    """Refuse bad output paths before hours of work, not after."""
+    """Refuse bad output paths (and options of the other mode) before hours of work."""
     from ctseg.filters.figure import offscreen_window
     from ctseg.filters.writers import MESH_FORMATS, check_output_path
+    from ctseg.filters.writers3d import check_tetra_output_path
 
-    check_output_path(args.output, MESH_FORMATS)
-    for path, exts in ((args.boundary, (".vtp",)), (args.figure, (".png",)), (args.report, (".json",))):
+    if args.params_obj.mode == "3d":
+        if args.boundary:
+            raise ParameterError("--boundary: the boundary polylines are slices mode's; in 3D "
+                                 "mode the interface triangles go to --surfaces OUT.vtp")
+        check_tetra_output_path(args.output)
+    else:
+        if args.surfaces:
+            raise ParameterError("--surfaces: the interface triangles are 3D mode's (--mode "
+                                 "3d); slices mode writes boundary polylines with --boundary")
+        check_output_path(args.output, MESH_FORMATS)
+    for path, exts in ((args.boundary, (".vtp",)), (args.surfaces, (".vtp",)),
+                       (args.figure, (".png",)), (args.report, (".json",))):
         if path:
             check_output_path(path, exts)
     if args.figure:
@@ -81,6 +101,17 @@ def _mesh(args):
     show = sys.stderr.isatty() and not args.quiet
     progress = _progress_printer(show)
     params = args.params_obj
+    truth = _read_truth(args.truth, image.shape)
+    if params.mode == "3d":
+        from ctseg.filters.job3d import segment_and_write_3d
+
+        if args.resume or args.dask:
+            print("ctseg: note: --resume and --dask apply to slices mode; 3D mode runs here, "
+                  "in one go", file=sys.stderr)
+        diag, written = segment_and_write_3d(image, geom, params, args.output, args.surfaces,
+                                             args.figure, truth, progress, name=args.input)
+        diag["input"] = os.path.abspath(args.input)
+        return _finish(args, image, diag, written)
     if image.ndim == 2:
         if args.resume:
             print("ctseg: note: --resume applies to volumes, whose slices are saved as they "
@@ -112,27 +143,51 @@ def _mesh(args):
         write_polydata(boundary, args.boundary)
         diag["boundary_output"] = os.path.abspath(args.boundary)
         diag["boundary_polylines"] = boundary.GetNumberOfLines()
-    if args.truth:
-        truth, _ = read_image(args.truth)
-        truth = np.asarray(truth)
-        if truth.shape != image.shape:
-            raise InputError(f"{args.truth}: truth shape {truth.shape} differs from the image's {image.shape}")
-        truth = truth.astype(np.int64)
+    if truth is not None:
         diag["accuracy"] = evaluate(result, truth) if image.ndim == 2 else evaluate_volume(result, truth)
     if args.figure:
         render_figure(args.figure, fig_image, fig_seg, title=fig_name)
         diag["figure"] = os.path.abspath(args.figure)
+    return _finish(args, image, diag, written)
+
+
+def _finish(args, image, diag, written):
+    """The report, the checkpoint's removal and the summary, once every output is written."""
     if args.report:
         from ctseg.filters.writers import atomic_outputs
 
         with atomic_outputs([args.report]) as (tmp,):
             with open(tmp, "w") as fh:
-                json.dump(diag, fh, indent=2)
+                json.dump(diag, fh, indent=2, default=_json_value)
     if getattr(args, "checkpoint", None):
         shutil.rmtree(args.checkpoint, ignore_errors=True)  # everything is written
     if not args.quiet:
-        _summary(args, image, diag, written)
+        if diag.get("mode") == "3d":
+            from ctseg.filters.job3d import summary_lines_3d
+
+            outs = written + [p for p in (args.surfaces, args.report, args.figure) if p]
+            print("\n".join(summary_lines_3d(args.input, diag, outs)))
+        else:
+            _summary(args, image, diag, written)
     return 0
+
+
+def _json_value(value):
+    """numpy scalars and arrays in a report, as JSON numbers and lists."""
+    return value.tolist() if hasattr(value, "tolist") else str(value)
+
+
+def _read_truth(path, shape):
+    """The truth labels (int64) for --truth, checked against the image's shape first."""
+    if not path:
+        return None
+    from ctseg.filters import read_image
+
+    truth, _ = read_image(path)
+    truth = np.asarray(truth)
+    if truth.shape != tuple(shape):
+        raise InputError(f"{path}: truth shape {truth.shape} differs from the image's {tuple(shape)}")
+    return truth.astype(np.int64)
 
 
 def checkpoint_folder(output):
@@ -269,8 +324,10 @@ def build_parser():
                        description=MESH_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     m.add_argument("input", help="image file or folder (see above)")
     m.add_argument("-o", "--output", required=True,
-                   help="output mesh: .vtp, .vtu, .ply, .stl, .obj or .mlp")
+                   help="output mesh: .vtp, .vtu, .ply, .stl, .obj or .mlp (3D mode: .vtu, "
+                        ".vtp, .stl, .ply or .obj)")
     m.add_argument("--boundary", help="also write the material boundary polylines (.vtp)")
+    m.add_argument("--surfaces", help="3D mode: also write the interface triangles (.vtp)")
     _add_parameter_options(m)
     m.add_argument("--dask", metavar="ADDRESS",
                    help="run a volume's slices on this Dask scheduler (e.g. tcp://host:8786)")
@@ -280,7 +337,8 @@ def build_parser():
     m.add_argument("--series", metavar="UID",
                    help="DICOM SeriesInstanceUID, for a folder holding several series")
     m.add_argument("--report", help="write all diagnostics as JSON (with every parameter used)")
-    m.add_argument("--figure", help="write the six-panel figure (PNG; a volume's middle slice)")
+    m.add_argument("--figure", help="write the six-panel figure (PNG; a volume's middle slice; "
+                   "3D mode: three slices and the surfaces)")
     m.add_argument("--truth", help="ground-truth labels (same shape) to report Dice against")
     m.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     p = sub.add_parser("params", help="list every parameter: default, valid range, unit, meaning")

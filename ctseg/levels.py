@@ -41,6 +41,61 @@ def weighted_spread(values, weights):
     return float(np.sqrt(np.cov(v[keep], aweights=w[keep])))
 
 
+def otsu_thresholds(values, weights, k):
+    """Multi-level Otsu: the ``k - 1`` thresholds that maximise the between-class variance
+    of the weighted values (exact, by dynamic programming over a 1024-bin histogram); a
+    value belongs to class ``searchsorted(thresholds, value)``.
+
+    Raises
+    ------
+    ParameterError
+        Fewer than ``k`` distinct values.
+
+    Example
+    -------
+    >>> t = otsu_thresholds([10, 11, 12, 50, 51, 90, 91], np.ones(7), 3)
+    >>> np.searchsorted(t, [10, 11, 12, 50, 51, 90, 91]).tolist()
+    [0, 0, 0, 1, 1, 2, 2]
+    """
+    v = np.asarray(values, float)
+    w = np.asarray(weights, float)
+    distinct = np.unique(v)
+    if len(distinct) < k:
+        raise ParameterError(f"n_materials: asked for {k} materials but the gray values hold "
+                             f"only {len(distinct)} distinct value(s)")
+    n_bins = 1024
+    lo, hi = float(distinct[0]), float(distinct[-1])
+    idx = np.minimum(((v - lo) / (hi - lo) * n_bins).astype(int), n_bins - 1)
+    hist = np.bincount(idx, w, n_bins)
+    centre = lo + (np.arange(n_bins) + 0.5) * (hi - lo) / n_bins
+    c0 = np.concatenate([[0.0], np.cumsum(hist)])
+    c1 = np.concatenate([[0.0], np.cumsum(hist * centre)])
+
+    def score(a, b):  # W * mean^2 of bins a..b-1 (the between-class term to maximise)
+        m = np.broadcast_to(c0[b] - c0[a], np.broadcast(a, b).shape)
+        s = np.broadcast_to((c1[b] - c1[a]) ** 2, m.shape)
+        return np.divide(s, m, out=np.full(m.shape, -np.inf), where=m > 0)
+
+    occupied = np.flatnonzero(hist > 0)
+    if len(occupied) < k:
+        raise ParameterError(f"n_materials: asked for {k} materials but the gray values fall "
+                             f"in only {len(occupied)} distinct level(s)")
+    cuts = np.unique(np.concatenate([occupied, occupied + 1]))  # class bounds worth trying
+    best = score(0, cuts)  # one class from bin 0 to each cut
+    back = []
+    for _ in range(k - 1):
+        table = best[:, None] + score(cuts[:, None], cuts[None, :])
+        table[cuts[:, None] >= cuts[None, :]] = -np.inf
+        back.append(np.argmax(table, axis=0))
+        best = table.max(axis=0)
+    j = int(np.flatnonzero(cuts == n_bins)[0])
+    bounds = []
+    for b in reversed(back):
+        j = int(b[j])
+        bounds.append(cuts[j])
+    return np.sort(lo + np.array(bounds, float) * (hi - lo) / n_bins)
+
+
 def material_modes(gray, area, bandwidth, min_area, separation, n_modes=None):
     """Material gray levels: the modes of the area-weighted histogram of triangle grays.
 
@@ -49,7 +104,10 @@ def material_modes(gray, area, bandwidth, min_area, separation, n_modes=None):
     them is above half the lower peak (no real separation) or they are closer than
     ``separation(level)`` gray levels; a mode whose basin holds less than ``min_area`` is
     merged into the neighbour it is least separated from. With ``n_modes`` the weakest
-    boundaries are merged until exactly that many modes remain, whatever the rules say.
+    boundaries are merged until exactly that many modes remain, whatever the rules say;
+    where the histogram shows fewer modes than that (no flat region separates them, as in
+    granular and porous media), the classes of multi-level Otsu (:func:`otsu_thresholds`)
+    are the modes.
 
     Returns
     -------
@@ -79,9 +137,12 @@ def material_modes(gray, area, bandwidth, min_area, separation, n_modes=None):
         return a + int(np.argmin(hist[a:b + 1]))
 
     if n_modes is not None and len(peaks) < n_modes:
-        raise ParameterError(
-            f"n_materials: asked for {n_modes} materials but the gray values show only "
-            f"{len(peaks)} distinct levels")
+        # fewer separated modes than asked for (granular or porous media, all partial
+        # volume): the classes of multi-level Otsu, which need only distinct values
+        edges = otsu_thresholds(f, w, n_modes)
+        basin = np.searchsorted(edges, f)
+        means = np.array([np.average(f[basin == k], weights=w[basin == k]) for k in range(n_modes)])
+        return means, edges
     while len(peaks) > 1:
         vals = [valley(i) for i in range(len(peaks) - 1)]
         bounds = [0] + [v + 1 for v in vals] + [nb]

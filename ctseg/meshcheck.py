@@ -104,7 +104,8 @@ def self_intersecting_faces(points, triangles):
     return int(ms.current_mesh().selected_face_number())
 
 
-def closed_surface_report(points, triangles, element_volume=None, rel_volume_tol=1e-9):
+def closed_surface_report(points, triangles, element_volume=None, rel_volume_tol=1e-9,
+                          intersection_points=None):
     """Measure what makes a closed surface (a material's boundary) unfit to write.
 
     Everything :func:`mesh_check_report` measures, plus: boundary edges (a hole),
@@ -113,12 +114,20 @@ def closed_surface_report(points, triangles, element_volume=None, rel_volume_tol
     solid's elements), its relative difference from it, which must stay within
     ``rel_volume_tol``.
 
+    pymeshlab's face-face test decides nearly coplanar faces by rounding: faces of one
+    flat side of a box, rotated into world coordinates, can come out as crossing. An
+    affine map changes no intersection, so ``intersection_points`` (the same vertices in
+    a frame where the flat sides are exactly flat, e.g. the box's own) may be given for
+    that one test.
+
     Parameters
     ----------
     points : (n, 3) array_like
     triangles : (m, 3) int array_like
     element_volume : float, optional
     rel_volume_tol : float
+    intersection_points : (n, 3) array_like, optional
+        ``points`` under an affine map, for the self-intersection test.
 
     Returns
     -------
@@ -140,7 +149,8 @@ def closed_surface_report(points, triangles, element_volume=None, rel_volume_tol
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=pts, face_matrix=tri.astype(np.int32)))
     report["boundary_edges"] = int(ms.get_topological_measures()["boundary_edges"])
-    report["self_intersecting_faces"] = self_intersecting_faces(pts, tri)
+    report["self_intersecting_faces"] = self_intersecting_faces(
+        pts if intersection_points is None else intersection_points, tri)
     vol = enclosed_volume(pts, tri)
     report["enclosed_volume"] = vol
     report["inward"] = int(not vol > 0)
@@ -156,10 +166,12 @@ def closed_surface_report(points, triangles, element_volume=None, rel_volume_tol
     return report
 
 
-def check_closed_surface(points, triangles, element_volume=None, what="surface"):
+def check_closed_surface(points, triangles, element_volume=None, what="surface",
+                         intersection_points=None):
     """Raise MeshCheckError naming every failed check of :func:`closed_surface_report`;
     return the report if all pass."""
-    report = closed_surface_report(points, triangles, element_volume)
+    report = closed_surface_report(points, triangles, element_volume,
+                                   intersection_points=intersection_points)
     if not report["ok"]:
         bad = [f"{k}={v}" for k, v in report.items()
                if k not in ("faces", "vertices", "ok", "enclosed_volume", "element_volume",

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._validate import as_volume
-from .errors import CTSegError, ParameterError
+from .errors import CTSegError, InputError, ParameterError
 from .geometry import slice_axis, volume_slice
 from .levels import LEVEL_SAMPLE_VOXELS, volume_levels
 from .params import AUTO, resolve
@@ -291,6 +291,9 @@ def segment_array(array, params=None, *, spacing=None, progress=None, client=Non
     """
     arr = np.asarray(array)
     if arr.ndim == 2:
+        if resolve(params, **overrides).mode == "3d":
+            raise InputError(f"mode '3d': the input is a single {arr.shape[0]} x {arr.shape[1]} "
+                             "slice; 3D mode needs a volume (use slices mode for a slice)")
         return segment_image(arr, params, progress=progress, **overrides)
     return segment_volume(arr, params, spacing=spacing, client=client, progress=progress,
                           keep_maps=keep_maps, checkpoint=checkpoint, **overrides)

@@ -244,6 +244,9 @@ def append_polydata(parts):
 def segmentation_to_polydata(result, geometry=None):
     """A :class:`ctseg.SegmentedMesh` (2D image) or :class:`ctseg.volume.VolumeSegmentation`
     -> (mesh vtkPolyData, boundary vtkPolyData), all slices in one of each."""
+    if hasattr(result, "tetrahedra"):
+        raise InputError("segmentation_to_polydata: a 3D (tetrahedral) segmentation; use "
+                         "ctseg.filters.tetra_segmentation_to_vtk")
     slices = getattr(result, "slices", None)
     axis = result.axis if slices is not None else 0  # numpy axis; a 2D image is along z
     slices = slices if slices is not None else [result]

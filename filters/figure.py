@@ -169,8 +169,7 @@ def render_figure(path, image, seg, title=None):
     InputError
         Not a .png path, or a segmentation without its per-pixel maps.
     """
-    from vtkmodules.vtkIOImage import vtkPNGWriter
-    from vtkmodules.vtkRenderingCore import vtkRenderer, vtkTextActor, vtkWindowToImageFilter
+    from vtkmodules.vtkRenderingCore import vtkRenderer, vtkTextActor
     import vtkmodules.vtkRenderingFreeType  # noqa: F401 - text rendering
 
     path, _ = check_output_path(path, (".png",))
@@ -184,6 +183,8 @@ def render_figure(path, image, seg, title=None):
     edges = _edges(seg.triangles)
     n_regions = int(seg.cvt_labels.max()) + 1
     corrected = seg.corrected_image
+    # the window first: it loads the OpenGL implementations the actors below are made of
+    window = offscreen_window()
     panels = [
         ("input", [_image_actor(img, (lo, hi))]),
         ("density map", [_image_actor(seg.density, (seg.density.min(), seg.density.max()))]),
@@ -206,7 +207,6 @@ def render_figure(path, image, seg, title=None):
     scale = PANEL_PX / max(rows, cols)
     pw, ph = int(round(cols * scale)), int(round(rows * scale))
     width, height = 3 * pw, 2 * (ph + TITLE_PX)
-    window = offscreen_window()
     window.SetSize(width, height)
     window.SetMultiSamples(0)
     for k, (label, actors) in enumerate(panels):
@@ -234,6 +234,16 @@ def render_figure(path, image, seg, title=None):
         cam.SetParallelScale(0.5 * rows * (ph + TITLE_PX) / ph)
         ren.ResetCameraClippingRange()
         window.AddRenderer(ren)
+    return save_window(window, path)
+
+
+def save_window(window, path):
+    """Render ``window``, write it to ``path`` as PNG (under a temporary name, then
+    renamed), release it and return the picture as an (h, w, 3) uint8 array, top row
+    first."""
+    from vtkmodules.vtkIOImage import vtkPNGWriter
+    from vtkmodules.vtkRenderingCore import vtkWindowToImageFilter
+
     window.Render()
     grab = vtkWindowToImageFilter()
     grab.SetInput(window)

@@ -1,26 +1,36 @@
-"""The composite filter: vtkImageData (a slice or a volume) -> segmented vtkPolyData.
+"""The composite filter: vtkImageData (a slice or a volume) -> segmented mesh: triangles
+(slices mode) or tetrahedra (3D mode).
 
 ``segment_array`` (the one slice-or-volume dispatch of :mod:`ctseg.volume`) is offered here
 too, so that the application plugins reach ctseg through the VTK layer only."""
+from vtkmodules.vtkCommonDataModel import vtkDataObject, vtkPolyData, vtkUnstructuredGrid
+
+from ctseg.errors import InputError
 from ctseg.params import SPECS
 from ctseg.volume import segment_array
 
 from .base import CTSegAlgorithm
 from .convert import image_to_array, segmentation_to_polydata
+from .convert3d import tetra_segmentation_to_vtk
 
 
 class CTSegmentFilter(CTSegAlgorithm):
-    """Segment a vtkImageData into a triangle mesh with one material per triangle
-    (Yang et al. 2014): :func:`ctseg.segment_image` for one slice,
-    :func:`ctseg.volume.segment_volume` slice by slice for a volume.
+    """Segment a vtkImageData into a mesh with one material per element (Yang et al.
+    2014): :func:`ctseg.segment_image` for one slice, :func:`ctseg.volume.segment_volume`
+    for a volume, slice by slice or, with Mode '3d', in tetrahedra
+    (:func:`ctseg.pipeline3d.segment_volume_3d`, with the image's spacing).
 
-    Output 0: the mesh in world coordinates (the image's origin, spacing and direction) with
-    cell arrays ``material`` (0..K-1, one numbering for the whole volume), ``gray`` (input
-    units) and ``slice``. Output 1: the material boundaries as polylines with
-    ``material_a``, ``material_b`` and ``slice``.
+    Slices mode: output 0 the triangle mesh (vtkPolyData) in world coordinates (the
+    image's origin, spacing and direction) with cell arrays ``material`` (0..K-1, one
+    numbering for the whole volume), ``gray`` (input units) and ``slice``; output 1 the
+    material boundaries as polylines with ``material_a``, ``material_b`` and ``slice``.
+
+    3D mode: output 0 the tetrahedra (vtkUnstructuredGrid) in world coordinates with
+    ``material`` and ``gray``; output 1 the interface triangles (vtkPolyData) with
+    ``material_a`` < ``material_b``, normals from a to b. A single slice is refused.
 
     Parameters: every parameter of :mod:`ctseg.params` (``ctseg params`` lists them), each
-    as Set/Get of its VTK name (SetNumberOfSites, SetLambda, SetSliceAxis,
+    as Set/Get of its VTK name (SetNumberOfSites, SetLambda, SetSliceAxis, SetMode,
     SetNumberOfJobs, ...) and through SetParameter(name, value) by its spec name; and
     SetDaskClient (a ``distributed.Client`` or a scheduler address: a volume's slices then
     run on that cluster).
@@ -31,7 +41,7 @@ class CTSegmentFilter(CTSegAlgorithm):
     def __init__(self):
         super().__init__(input_type="vtkImageData", n_outputs=2, output_type="vtkPolyData")
         self._client = None
-        self.result = None  # the last SegmentedMesh or VolumeSegmentation
+        self.result = None  # the last SegmentedMesh, VolumeSegmentation or TetraSegmentation
 
     def SetDaskClient(self, client):
         """A distributed.Client or a scheduler address ('tcp://host:8786'); None = local."""
@@ -43,12 +53,35 @@ class CTSegmentFilter(CTSegAlgorithm):
         """The Dask client or scheduler address set, or None."""
         return self._client
 
+    # output 0 is a vtkPolyData or a vtkUnstructuredGrid by Mode: declared as any data
+    # object, made concrete in RequestDataObject (VTK fixes the type per port otherwise)
+    def FillOutputPortInformation(self, port, info):
+        info.Set(vtkDataObject.DATA_TYPE_NAME(), "vtkDataObject" if port == 0 else "vtkPolyData")
+        return 1
+
+    def RequestDataObject(self, request, in_info, out_info):
+        types = (vtkUnstructuredGrid if self.params.mode == "3d" else vtkPolyData, vtkPolyData)
+        for port, cls in enumerate(types):
+            info = out_info.GetInformationObject(port)
+            current = info.Get(vtkDataObject.DATA_OBJECT())
+            if current is None or current.GetClassName() != cls.__name__:
+                info.Set(vtkDataObject.DATA_OBJECT(), cls())
+        return 1
+
     def _request(self, request, in_info, out_info):
         arr, geom = image_to_array(self._input(in_info))
+        three_d = self.params.mode == "3d"
+        if three_d and arr.ndim != 3:
+            raise InputError(f"image: shape {arr.shape} is one slice; Mode '3d' needs a volume "
+                             "of at least 2 voxels along every axis (use Mode 'slices')")
         self.UpdateProgress(0.0)
-        result = segment_array(arr, self.params, client=self._client,
+        result = segment_array(arr, self.params, spacing=geom.spacing, client=self._client,
                                progress=self._progress())
         self.result = result
-        mesh, boundary = segmentation_to_polydata(result, geom)
-        self._output_poly(out_info, 0).ShallowCopy(mesh)
-        self._output_poly(out_info, 1).ShallowCopy(boundary)
+        if three_d:
+            mesh, second = tetra_segmentation_to_vtk(result, geom)
+        else:
+            mesh, second = segmentation_to_polydata(result, geom)
+        vtkDataObject.GetData(out_info, 0).ShallowCopy(mesh)
+        self._output_poly(out_info, 1).ShallowCopy(second)
+        self.UpdateProgress(1.0)

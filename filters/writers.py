@@ -51,6 +51,13 @@ def check_output_path(path, ext_expected=None):
     return path, ext
 
 
+def _file_mode():
+    """The permissions a new file gets from open(): 0666 less the umask."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 @contextlib.contextmanager
 def atomic_outputs(paths):
     """Yield temporary names beside ``paths``; rename them all onto ``paths`` on success,
@@ -67,7 +74,9 @@ def atomic_outputs(paths):
             os.close(fd)
             temps.append(tmp)
         yield temps
+        mode = _file_mode()
         for tmp, p in zip(temps, paths):
+            os.chmod(tmp, mode)  # mkstemp's 0600 -> what open() would have given
             os.replace(tmp, p)
         temps = []
     finally:

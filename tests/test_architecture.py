@@ -12,7 +12,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CODE_DIRS = ("ctseg", "filters", "plugin")
 SPEC_FILE = os.path.join(ROOT, "ctseg", "params.py")
 # the simulator's own seed is the phantom's, not the segmentation's parameter
-NOT_STAGES = {os.path.join(ROOT, "ctseg", "phantoms.py")}
+NOT_STAGES = {os.path.join(ROOT, "ctseg", "phantoms.py"), os.path.join(ROOT, "ctseg", "phantoms3d.py")}
 PAPER_DEFAULTS = (SPECS["lam"].default, SPECS["beta"].default)
 
 

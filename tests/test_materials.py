@@ -63,8 +63,10 @@ def test_three_materials_numbered_by_gray():
     # n_materials=2 merges the two closest materials
     res2 = segment_triangles(np.clip(g, 0, 255), a, m.adjacency, c, n_materials=2)
     assert len(res2.material_gray) == 2
-    with pytest.raises(ParameterError):
-        segment_triangles(np.clip(g, 0, 255), a, m.adjacency, c, n_materials=40)
+    # more than the histogram's modes: honoured (multi-level Otsu) while distinct grays last
+    assert len(segment_triangles(np.clip(g, 0, 255), a, m.adjacency, c, n_materials=5).material_gray) == 5
+    with pytest.raises(ParameterError, match="n_materials"):
+        segment_triangles(np.clip(g, 0, 255), a, m.adjacency, c, n_materials=len(g) + 1)
 
 
 def test_constant_gray_is_one_material():

@@ -1,0 +1,199 @@
+"""``ctseg mesh --mode 3d``: a volume file to tetrahedra, closed surfaces, interfaces, report,
+figure and Dice, in the file's world geometry; and the inputs and options it refuses."""
+import json
+import os
+
+import numpy as np
+import pytest
+
+from ctseg.cli import main
+from ctseg.filters import read_image
+from ctseg.filters.convert3d import grid_to_arrays
+from ctseg.filters.writers3d import read_unstructured_grid
+from ctseg.phantoms import make_volume
+from ctseg.tetrahedra import tetra_volumes
+
+from conftest import requires_rendering
+
+# LPS-like: x and y flipped, then one more flip of z (det -1), tilted about z
+_C, _S = np.cos(0.3), np.sin(0.3)
+DIRECTION = np.array([[_C, -_S, 0], [_S, _C, 0], [0, 0, 1.0]]) @ np.diag([-1.0, -1.0, -1.0])
+SPACING = np.array([0.1, 0.1, 0.3])
+
+
+def _write_nrrd(path, image, direction=DIRECTION, spacing=SPACING, origin=(12.0, -3.0, 40.0)):
+    import nrrd
+
+    # NRRD's space directions: one row per axis, x (fastest) first
+    header = {"space": "left-posterior-superior", "space origin": np.asarray(origin, float),
+              "space directions": (direction * spacing).T}
+    nrrd.write(str(path), image, header, index_order="C")
+
+
+@pytest.fixture(scope="module")
+def volume_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("vol3d")
+    p = make_volume(12, 28, seed=2)
+    _write_nrrd(d / "v.nrrd", p.image)
+    np.save(d / "t.npy", p.truth)
+    np.save(d / "v.npy", p.image)
+    return d
+
+
+@requires_rendering
+def test_3d_command_writes_everything(volume_files, tmp_path, capsys):
+    d = volume_files
+    rc = main(["mesh", str(d / "v.nrrd"), "--mode", "3d", "-o", str(tmp_path / "m.vtu"),
+               "--surfaces", str(tmp_path / "s.vtp"), "--report", str(tmp_path / "r.json"),
+               "--figure", str(tmp_path / "f.png"), "--truth", str(d / "t.npy"),
+               "--sites", "300"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    for word in ("tetrahedra", "materials", "interface triangles", "surfaces: material 0",
+                 "quality: min dihedral", "mesh checks: passed", "Dice per material"):
+        assert word in out, (word, out)
+    report = json.loads((tmp_path / "r.json").read_text())
+    for key in ("times_s", "peak_memory_mib", "cvt_energy", "lloyd_iterations",
+                "element_quality", "surfaces", "mesh_checks", "accuracy", "parameters",
+                "surfaces_output", "figure"):
+        assert key in report, key
+    assert report["parameters"]["volume"]["mode"] == "3d" and report["n_sites"] == 300
+    assert set(report["times_s"]) >= {"density", "cvt", "tetrahedra", "graphcut", "surfaces"}
+    assert all(s["ok"] for s in report["mesh_checks"]["surfaces"])
+    assert report["accuracy"]["dice"][0] > 0.9
+    # world geometry: the file's; every tetrahedron positive there; the box filled
+    _, geom = read_image(str(d / "v.nrrd"))
+    assert np.linalg.det(geom.direction) < 0
+    pts, tets, arrays = grid_to_arrays(read_unstructured_grid(tmp_path / "m.vtu"))
+    assert len(tets) == report["n_tetrahedra"] and arrays["material"].max() == report["n_materials"] - 1
+    vol = tetra_volumes(pts, tets)
+    box = (np.array([28, 28, 12]) - 1) * SPACING
+    assert vol.min() > 0
+    np.testing.assert_allclose(vol.sum(), np.prod(box), rtol=1e-9)
+    ijk = geom.to_index(pts)
+    np.testing.assert_allclose(ijk.min(axis=0), 0, atol=1e-9)
+    np.testing.assert_allclose(ijk.max(axis=0), [27, 27, 11], atol=1e-9)
+    from ctseg.filters import polydata_to_arrays, read_polydata
+
+    _, tri, side = polydata_to_arrays(read_polydata(tmp_path / "s.vtp"))
+    assert len(tri) == report["n_interface_triangles"] and np.all(side["material_a"] < side["material_b"])
+    assert os.path.getsize(tmp_path / "f.png") > 10_000
+    assert sorted(os.listdir(tmp_path)) == ["f.png", "m.vtu", "r.json", "s.vtp"]
+
+
+@pytest.mark.parametrize("ext", [".vtp", ".stl", ".ply", ".obj"])
+def test_3d_surface_formats(volume_files, tmp_path, ext):
+    assert main(["mesh", str(volume_files / "v.npy"), "--mode", "3d", "-o",
+                 str(tmp_path / f"m{ext}"), "--sites", "150", "--report",
+                 str(tmp_path / "r.json"), "-q"]) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    k = report["n_materials"]
+    expected = {".vtp": ["m.vtp"], ".ply": ["m.ply"], ".obj": ["m.mtl", "m.obj"],
+                ".stl": [f"m_material{m}.stl" for m in range(k)]}[ext]
+    assert sorted(os.listdir(tmp_path)) == sorted(expected + ["r.json"])
+    assert [os.path.basename(p) for p in report["outputs"]] == sorted(expected, key=lambda n: n.endswith(".mtl"))
+
+
+def test_report_parameters_reproduce_the_run(volume_files, tmp_path):
+    cmd = ["mesh", str(volume_files / "v.npy"), "-q"]
+    assert main(cmd + ["--mode", "3d", "--sites", "120", "-o", str(tmp_path / "a.vtu"),
+                       "--report", str(tmp_path / "a.json")]) == 0
+    assert main(cmd + ["--params", str(tmp_path / "a.json"), "-o", str(tmp_path / "b.vtu")]) == 0
+    assert (tmp_path / "a.vtu").read_bytes() == (tmp_path / "b.vtu").read_bytes()
+
+
+def test_constant_volume_is_one_material_filling_the_box(tmp_path):
+    """As in 2D (tests/test_bad_input.py), a constant input is valid: one material, whose
+    closed surface is the box."""
+    np.save(tmp_path / "c.npy", np.full((5, 9, 11), 7.0))
+    assert main(["mesh", str(tmp_path / "c.npy"), "--mode", "3d", "-o", str(tmp_path / "c.vtu"),
+                 "--report", str(tmp_path / "r.json"), "-q"]) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["n_materials"] == 1 and report["n_interface_triangles"] == 0
+    np.testing.assert_allclose(report["surfaces"][0]["enclosed_volume"], 10 * 8 * 4, rtol=1e-9)
+
+
+# ------------------------------------------------------------------- refused: one line, exit 2
+def _refused(tmp_path, capsys, args, *words):
+    before = set(os.listdir(tmp_path))
+    rc = main(["mesh"] + [str(a) for a in args])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2, err
+    assert err.startswith("ctseg: error:") and len(err.splitlines()) == 1, err
+    assert "Traceback" not in err
+    for word in words:
+        assert word in err, (word, err)
+    assert set(os.listdir(tmp_path)) == before, "an output was written"
+
+
+def _vol(shape=(6, 12, 14)):
+    return make_volume(shape[0], 12, seed=1).image[:, :shape[1], :shape[2]]
+
+
+@pytest.mark.parametrize("name,array,words", [
+    ("one_slice", _vol()[:1], ["in.npy", "3D mode needs a volume", "2 voxels along every axis"]),
+    ("one_row", _vol()[:, :1, :], ["in.npy", "3D mode needs a volume"]),
+    ("one_column", _vol()[:, :, :1], ["in.npy", "3D mode needs a volume"]),
+    ("nan", np.where(np.arange(6 * 12 * 12).reshape(6, 12, 12) == 100, np.nan, 1.0),
+     ["NaN or infinite", "slice 0"]),
+    ("inf", np.full((4, 8, 8), np.inf), ["NaN or infinite"]),
+])
+def test_refused_volumes(tmp_path, capsys, name, array, words):
+    np.save(tmp_path / "in.npy", array)
+    _refused(tmp_path, capsys, [tmp_path / "in.npy", "--mode", "3d", "-o", tmp_path / "m.vtu"],
+             *words)
+
+
+@pytest.mark.parametrize("spacing", [(0.1, -0.1, 0.3), (0.1, 0.0, 0.3)])
+def test_refused_spacing(tmp_path, capsys, spacing):
+    import nrrd
+
+    nrrd.write(str(tmp_path / "v.nrrd"), _vol(), {"spacings": list(spacing)}, index_order="C")
+    _refused(tmp_path, capsys, [tmp_path / "v.nrrd", "--mode", "3d", "-o", tmp_path / "m.vtu"],
+             "v.nrrd", "spacing")
+
+
+@pytest.mark.parametrize("extra,words", [
+    (["-o", "m.abc"], ["m.abc", "unknown output format", ".vtu"]),
+    (["-o", "m.mlp"], ["unknown output format"]),
+    (["-o", "m.msh"], ["Gmsh", "not written yet"]),
+    (["-o", "m.inp"], ["Abaqus", "not written yet"]),
+    (["-o", "m.xdmf"], ["XDMF", "not written yet"]),
+    (["-o", "nowhere/m.vtu"], ["does not exist"]),
+    (["-o", "sub"], ["is a folder"]),
+    (["-o", "in.npy/m.vtu"], ["does not exist"]),
+    (["-o", "m.vtu", "--boundary", "b.vtp"], ["--boundary", "--surfaces"]),
+    (["-o", "m.vtu", "--surfaces", "s.vtu"], ["s.vtu", "unknown output format"]),
+    (["-o", "m.vtu", "--figure", "f.jpg"], ["f.jpg", "unknown output format"]),
+    (["-o", "m.vtu", "--report", "r.txt"], ["r.txt", "unknown output format"]),
+    (["-o", "m.vtu", "--truth", "short.npy"], ["short.npy", "truth shape"]),
+    (["-o", "m.vtu", "--sites", "99999"], ["n_sites"]),
+])
+def test_refused_outputs_and_options(tmp_path, capsys, monkeypatch, extra, words):
+    np.save(tmp_path / "in.npy", _vol())
+    np.save(tmp_path / "short.npy", np.zeros((5, 12, 14), np.uint8))
+    os.mkdir(tmp_path / "sub")
+    monkeypatch.chdir(tmp_path)
+    _refused(tmp_path, capsys, ["in.npy", "--mode", "3d"] + extra, *words)
+
+
+def test_surfaces_is_refused_in_slices_mode(tmp_path, capsys, monkeypatch):
+    np.save(tmp_path / "in.npy", _vol())
+    monkeypatch.chdir(tmp_path)
+    _refused(tmp_path, capsys, ["in.npy", "-o", "m.vtp", "--surfaces", "s.vtp"],
+             "--surfaces", "--mode 3d", "--boundary")
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0,
+                    reason="root may write into a read-only folder")
+def test_unwritable_folder(tmp_path, capsys):
+    np.save(tmp_path / "in.npy", _vol())
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        _refused(tmp_path, capsys, [tmp_path / "in.npy", "--mode", "3d", "-o", ro / "m.vtu"],
+                 "not writable")
+        assert os.listdir(ro) == []
+    finally:
+        ro.chmod(0o755)
