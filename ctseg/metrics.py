@@ -2,7 +2,8 @@
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .raster import label_image, subpixel_label_image, volume_labels
+from .errors import InputError
+from .raster import label_image, subpixel_label_image, tetra_label_volume, volume_labels
 
 
 def dice_per_label(pred, truth, n_labels=None):
@@ -118,3 +119,31 @@ def evaluate_volume(vseg, truth):
     return {"dice": [float(d) for d in dice], "min_dice": float(np.nanmin(dice)),
             "n_materials_found": int(vseg.n_materials), "n_materials_true": int(truth.max()) + 1,
             "boundary_px": mean, "slices_with_boundaries": len(dist)}
+
+
+def evaluate_tetra(result, truth):
+    """Dice per material of a TetraSegmentation against per-voxel truth labels (numbered by
+    ascending gray like the materials), the tetrahedra rasterised by
+    :func:`tetra_label_volume`.
+
+    Returns
+    -------
+    dict
+        ``dice`` (per label, NaN where neither has it), ``min_dice``,
+        ``n_materials_found``, ``n_materials_true``.
+
+    Raises
+    ------
+    InputError
+        Truth of another shape than the segmented volume.
+    """
+    truth = np.asarray(truth)
+    if truth.shape != tuple(result.shape):
+        raise InputError(f"truth: shape {truth.shape} differs from the volume's {tuple(result.shape)}")
+    truth = truth.astype(np.int64)
+    pred = tetra_label_volume(result.points, result.tetrahedra, result.material, result.shape,
+                              result.spacing)
+    n = int(max(pred.max(), truth.max())) + 1
+    dice = dice_per_label(pred, truth, n)
+    return {"dice": [float(v) for v in dice], "min_dice": float(np.nanmin(dice)),
+            "n_materials_found": int(result.n_materials), "n_materials_true": int(truth.max()) + 1}

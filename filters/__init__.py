@@ -11,7 +11,6 @@ from .readers import read_image, SUPPORTED_INPUTS
 from .writers import write_mesh, write_polydata, read_polydata, MESH_FORMATS
 from .writers3d import (write_tetra_mesh, write_interfaces, check_tetra_segmentation,
                         read_unstructured_grid, TETRA_FORMATS)
-from .raster3d import tetra_label_volume, evaluate_tetra
 from .base import CTSegAlgorithm
 from .density import DensityMapFilter
 from .streaks import MetalStreakFilter
@@ -29,7 +28,7 @@ __all__ = ["ImageGeometry", "image_to_array", "array_to_image", "mesh_to_polydat
            "write_polydata", "read_polydata", "MESH_FORMATS", "tetra_segmentation_to_vtk",
            "material_surfaces_to_polydata", "grid_to_arrays", "write_tetra_mesh",
            "write_interfaces", "check_tetra_segmentation", "read_unstructured_grid",
-           "TETRA_FORMATS", "tetra_label_volume", "evaluate_tetra", "CTSegAlgorithm",
+           "TETRA_FORMATS", "CTSegAlgorithm",
            "MetalStreakFilter", "DensityMapFilter", "CVTSitesFilter", "DelaunayMeshFilter",
            "TriangleGrayFilter", "GraphCutSegmentFilter", "MaterialBoundaryFilter",
            "CTSegmentFilter", "segment_array"]

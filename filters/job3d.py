@@ -43,7 +43,7 @@ def segment_and_write_3d(image, geometry, params, output, surfaces=None, figure=
     from ctseg.volume import segment_array
 
     from .figure3d import render_volume_figure
-    from .raster3d import evaluate_tetra
+    from ctseg.metrics import evaluate_tetra
     from .writers3d import write_interfaces, write_tetra_mesh
 
     if image.ndim != 3 or min(image.shape) < 2:

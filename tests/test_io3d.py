@@ -10,7 +10,8 @@ from ctseg.filters import ImageGeometry, array_to_image
 from ctseg.filters.convert3d import (grid_to_arrays, material_surfaces_to_polydata,
                                      tetra_segmentation_to_vtk, world_interfaces,
                                      world_surfaces, world_tetrahedra)
-from ctseg.filters.raster3d import evaluate_tetra, tetra_label_volume
+from ctseg.metrics import evaluate_tetra
+from ctseg.raster import tetra_label_volume
 from ctseg.filters.writers3d import (check_tetra_segmentation, read_unstructured_grid,
                                      write_interfaces, write_tetra_mesh)
 from ctseg.meshcheck import closed_surface_report, enclosed_volume
@@ -257,7 +258,7 @@ def test_closed_surface_report_finds_self_intersection_and_volume_mismatch():
 
 # ------------------------------------------------------------------------- rasteriser
 def test_rasteriser_puts_each_voxel_in_a_tetrahedron_holding_it(seg):
-    import ctseg.filters.raster3d as raster
+    import ctseg.raster as raster
 
     labels = tetra_label_volume(seg.points, seg.tetrahedra, seg.material, seg.shape, seg.spacing)
     kk, jj, ii = np.indices(seg.shape)
