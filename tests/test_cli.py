@@ -109,7 +109,10 @@ def test_errors_are_one_line_and_exit_2(slice_files, capsys, monkeypatch, args, 
 
 
 def test_console_script_help():
-    out = subprocess.run([sys.executable, "-m", "ctseg.cli", "mesh", "--help"], capture_output=True, text=True)
+    # cwd: `python -m` puts the working directory first on sys.path, and a checkout's
+    # ctseg/ folder is not the installed package (ctseg.filters lives in filters/)
+    out = subprocess.run([sys.executable, "-m", "ctseg.cli", "mesh", "--help"], capture_output=True,
+                         text=True, cwd=os.path.dirname(os.path.abspath(__file__)))
     assert out.returncode == 0 and "--set NAME=VALUE" in out.stdout and "n_sites" in out.stdout
 
 
@@ -218,6 +221,7 @@ def test_real_sigint_to_the_command(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "ctseg.cli", "mesh", str(tmp_path / "v.npy"),
                              "-o", str(tmp_path / "m.vtp"), "--jobs", "2", "--sites", "300"],
                             stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            cwd=tmp_path,  # the installed ctseg, not a checkout's folder
                             # as from a terminal: a shell that runs this suite in the
                             # background (nohup, CI) makes its children ignore SIGINT
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
