@@ -2,7 +2,7 @@
 
 - :func:`multi_otsu_thresholds`: multi-level Otsu thresholding, the simplest baseline.
 - :func:`pixel_graph`: the 4-connected pixel grid as a graph for the same recursive graph
-  cut that ctseg runs on triangles (:func:`ctseg.materials.segment_triangles`).
+  cut that ctseg runs on triangles (:func:`ctseg.recursive_cut.segment_triangles`).
 - :func:`pixel_boundary`: the material boundary of a pixel labelling as segments on the
   pixel edges, for the same boundary distance as the meshes.
 """

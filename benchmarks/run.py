@@ -10,7 +10,7 @@ and PNG plots next to them. On simulated slices with known truth (ctseg.phantoms
    (.vtp, pymeshlab checks included; loading excluded) at the paper's sizes, 512 x 512 /
    1000 sites and 700 x 500 / 1200 sites, with peak memory and accuracy;
 2. graphcut: the recursive graph cut on the CVT triangles vs the same cut (SPEC 6-7
-   energy, same levels and rules: ctseg.materials.segment_triangles) on the 4-connected
+   energy, same levels and rules: ctseg.recursive_cut.segment_triangles) on the 4-connected
    pixel grid, and multi-level Otsu thresholding: time (median of 5, side by side in
    this process), peak memory (each alone in a fresh process), Dice and boundary distance;
 3. init: Ward vs random vs density-weighted random initial sites: final CVT energy,
@@ -132,7 +132,7 @@ def child_main(spec):
             image = np.load(spec["image"]) if "image" in spec else big_slice(spec["rows"])
             job = lambda: segment_and_write(image, spec["n_sites"], folder)  # noqa: E731
         else:  # a prepared graph for the recursive graph cut
-            from ctseg.materials import segment_triangles
+            from ctseg.recursive_cut import segment_triangles
 
             z = dict(np.load(spec["path"]))
             job = lambda: segment_triangles(z["gray"], z["area"], z["adjacency"],  # noqa: E731
@@ -195,8 +195,8 @@ def bench_graphcut(repeats):
     import ctseg
     from baselines import otsu_labels, pixel_graph
     from ctseg.intensity import rescale_gray
-    from ctseg.materials import segment_triangles
-    from ctseg.pipeline import correct_streaks
+    from ctseg.recursive_cut import segment_triangles
+    from ctseg.beam_hardening import correct_streaks
     from ctseg.triangulation import triangle_areas
 
     rows = []

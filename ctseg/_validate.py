@@ -53,9 +53,10 @@ def check_number(value, name, low=None, high=None, low_open=False, high_open=Fal
     return value
 
 
-def as_volume(volume, name="volume"):
+def as_volume(volume, name="volume", min_side=1):
     """Return ``volume`` as a 3D numeric array (a 2D one as one slice), or raise InputError
-    saying what is wrong. NaN and infinite values are refused here, before any slice runs."""
+    saying what is wrong. NaN and infinite values are refused here, before any slice runs;
+    ``min_side`` is the fewest voxels along every axis (2 for the 3D stages)."""
     try:
         vol = np.asarray(volume)
     except Exception as exc:
@@ -66,6 +67,9 @@ def as_volume(volume, name="volume"):
         raise InputError(f"{name}: expected a 3D array (slices, rows, cols), got shape {vol.shape}")
     if vol.size == 0:
         raise InputError(f"{name}: the array is empty (shape {vol.shape})")
+    if min(vol.shape) < min_side:
+        raise InputError(f"{name}: shape {vol.shape} is too small; each side needs at least "
+                         f"{min_side} voxels")
     if vol.dtype == object or not (np.issubdtype(vol.dtype, np.number) or vol.dtype == bool) \
             or np.iscomplexobj(vol):
         raise InputError(f"{name}: expected real numbers, got dtype {vol.dtype}")
@@ -76,3 +80,15 @@ def as_volume(volume, name="volume"):
             raise InputError(f"{name}: {int(bad.sum())} voxel(s) are NaN or infinite (first in "
                              f"slice {k}, row {r}, col {c})")
     return vol
+
+
+def check_spacing(spacing):
+    """``spacing`` as a float64 array (sx, sy, sz): three finite numbers > 0, or
+    ParameterError."""
+    try:
+        sp = np.asarray(spacing, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ParameterError(f"spacing: expected three numbers (sx, sy, sz), got {spacing!r}") from None
+    if sp.shape != (3,) or not np.all(np.isfinite(sp)) or not np.all(sp > 0):
+        raise ParameterError(f"spacing: expected three finite numbers > 0 (sx, sy, sz), got {spacing!r}")
+    return sp

@@ -207,7 +207,7 @@ def _resume_hint(args):
 def _checked_input(image, path):
     """The input as a slice or a volume, or an InputError naming the file."""
     from ._validate import as_image
-    from .volume import as_volume
+    from ._validate import as_volume
 
     if image.ndim == 3 and image.shape[0] == 1:
         image = image[0]

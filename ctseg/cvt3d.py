@@ -7,7 +7,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._cvt3d import _assign_3d, _reassign_3d, _region_sums_3d
-from .density import check_spacing
+from ._validate import check_spacing
 from .errors import InputError, ParameterError
 from .params import DEFAULTS, check
 

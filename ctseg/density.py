@@ -2,8 +2,8 @@
 import numpy as np
 from scipy import ndimage
 
-from ._validate import as_image
-from .errors import InputError, ParameterError
+from ._validate import as_image, as_volume, check_spacing
+from .errors import InputError
 from .params import AUTO, DEFAULTS, check
 
 
@@ -107,43 +107,6 @@ def _rho_from_gradient(mag, floor, saturation, ridge, size):
     return floor + strength
 
 
-def check_spacing(spacing):
-    """``spacing`` as a float64 array (sx, sy, sz): three finite numbers > 0, or
-    ParameterError."""
-    try:
-        sp = np.asarray(spacing, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ParameterError(f"spacing: expected three numbers (sx, sy, sz), got {spacing!r}") from None
-    if sp.shape != (3,) or not np.all(np.isfinite(sp)) or not np.all(sp > 0):
-        raise ParameterError(f"spacing: expected three finite numbers > 0 (sx, sy, sz), got {spacing!r}")
-    return sp
-
-
-def as_volume(volume, name="volume"):
-    """``volume`` as a finite float64 (nz, ny, nx) array with every side >= 2, or
-    InputError saying what is wrong."""
-    try:
-        arr = np.asarray(volume)
-    except Exception as exc:  # e.g. ragged nested lists
-        raise InputError(f"{name}: cannot be read as an array ({exc})") from None
-    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
-        raise InputError(f"{name}: expected a numeric array, got dtype {arr.dtype}")
-    if np.iscomplexobj(arr):
-        raise InputError(f"{name}: complex values are not a CT volume (dtype {arr.dtype})")
-    if arr.ndim != 3:
-        raise InputError(f"{name}: expected a 3D array (nz, ny, nx), got shape {arr.shape}")
-    if min(arr.shape) < 2:
-        raise InputError(f"{name}: shape {arr.shape} is too small; each side needs at least "
-                         "2 voxels")
-    arr = arr.astype(np.float64)
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        k, j, i = np.argwhere(bad)[0]
-        raise InputError(f"{name}: {int(bad.sum())} voxel(s) are NaN or infinite (first at "
-                         f"(k, j, i) = ({k}, {j}, {i}))")
-    return arr
-
-
 def density_volume(volume, spacing=(1.0, 1.0, 1.0), density_sigma_px=DEFAULTS.density_sigma_px,
                    density_floor=DEFAULTS.density_floor,
                    density_saturation=DEFAULTS.density_saturation,
@@ -198,7 +161,9 @@ def density_volume(volume, spacing=(1.0, 1.0, 1.0), density_sigma_px=DEFAULTS.de
     >>> rho.shape, bool(rho[:, :, 7:9].mean() > rho[:, :, :4].mean())
     ((8, 16, 16), True)
     """
-    vol = as_volume(volume)
+    if np.ndim(volume) != 3:
+        raise InputError(f"volume: expected a 3D array (nz, ny, nx), got shape {np.shape(volume)}")
+    vol = as_volume(volume, min_side=2).astype(np.float64)
     sp = check_spacing(spacing)
     sigma = check("density_sigma_px", density_sigma_px)
     floor = check("density_floor", density_floor)

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._validate import as_volume
+from ._validate import as_volume, check_spacing
 from .beam_hardening import correct_streaks
 from .blur import blur_corrected_gray_3d, region_levels
 from .cvt3d import lloyd_cvt_3d
@@ -80,14 +80,6 @@ class TetraSegmentation:
         return len(self.material_gray)
 
 
-def _check_spacing(spacing):
-    sp = np.asarray([1.0, 1.0, 1.0] if spacing is None else spacing, float).ravel()
-    if sp.shape != (3,) or not np.all(np.isfinite(sp)) or np.any(sp <= 0):
-        raise ParameterError("spacing: expected three positive finite numbers (x, y, z), got "
-                             f"{spacing!r}")
-    return sp
-
-
 def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **overrides):
     """Segment a volume into tetrahedra with one material each, and closed surfaces.
 
@@ -151,7 +143,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     if min(vol.shape) < 2:
         raise InputError(f"volume: shape {vol.shape}; 3D mode needs at least 2 voxels along "
                          "every axis (a single slice is a 2D problem: use slices mode)")
-    sp = _check_spacing(spacing)
+    sp = check_spacing((1.0, 1.0, 1.0) if spacing is None else spacing)
     report = progress or (lambda frac, stage: None)
     times, peaks = {}, {}
 

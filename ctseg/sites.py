@@ -4,7 +4,7 @@ import numpy as np
 
 from ._validate import check_number
 from ._ward import _ward_merges
-from .density import check_spacing
+from ._validate import check_spacing
 from .errors import InputError, ParameterError
 from .params import AUTO, DEFAULTS, SPECS, check
 

@@ -63,8 +63,8 @@ def test_density_volume_constant_and_range():
 
 
 @pytest.mark.parametrize("bad, match", [
-    (np.zeros((4, 5)), "3D"), (np.zeros((1, 4, 5)), "at least 2"), (np.zeros((2, 3, 4), object), "numeric"),
-    (np.full((2, 3, 4), np.nan), "NaN"), (np.zeros((2, 3, 4), complex), "complex")])
+    (np.zeros((4, 5)), "3D"), (np.zeros((1, 4, 5)), "at least 2"), (np.zeros((2, 3, 4), object), "real numbers"),
+    (np.full((2, 3, 4), np.nan), "NaN"), (np.zeros((2, 3, 4), complex), "real numbers")])
 def test_density_volume_bad_volume(bad, match):
     with pytest.raises(InputError, match=match):
         density_volume(bad)
