@@ -44,30 +44,13 @@ from scipy import ndimage
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
+from run import reset_peak, status_mib  # noqa: E402  (the benchmarks' one memory probe)
+
 METHODS = ("ctseg_3d", "ctseg_slices", "otsu", "graphcut")
 GOALS = {"min_dice": 0.95, "interface_mean_vox": 0.5, "interface_p95_vox": 1.5,
          "tets_per_voxel": 1 / 20, "min_dihedral_deg": 5.0, "p1_dihedral_deg": 13.0,
          "non_manifold_edges": 0, "wall_s_at_160": 15.0}
 EDGE_VOX = 1.8  # an error this close to a true boundary is a partial-volume (edge) error
-
-
-def status_mib(field):
-    """VmRSS (now) or VmHWM (peak since the last reset) of this process, MiB."""
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(field + ":"):
-                return int(line.split()[1]) / 1024
-    return float("nan")
-
-
-def reset_peak():
-    """Reset VmHWM to the current RSS (Linux >= 4.0); False where that is refused."""
-    try:
-        with open("/proc/self/clear_refs", "w") as fh:
-            fh.write("5")
-        return True
-    except OSError:
-        return False
 
 
 # ------------------------------------------------------------------ the jobs (in a child)

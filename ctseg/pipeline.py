@@ -1,5 +1,6 @@
 """The whole 2D method in one call: image -> segmented triangle mesh (paper sections 5-6)."""
 import time
+import tracemalloc
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -20,6 +21,26 @@ from .triangulation import delaunay_mesh
 
 DENSITY_KEYS = ("density_sigma_px", "density_floor", "density_saturation", "density_ridge")
 """The parameters of :func:`ctseg.density_map`."""
+
+
+def stage_runner(report, times, peaks_mib=None):
+    """A function ``timed(name, fraction, fn, *args, **kwargs)`` that reports the stage
+    starting (``report(fraction, name)``), runs ``fn`` and records its wall time in
+    ``times[name]``, and, given ``peaks_mib``, the peak of the memory traced meanwhile
+    (tracemalloc, MiB) in ``peaks_mib[name]``."""
+    def timed(name, frac, fn, *a, **k):
+        report(frac, name)  # the stage that starts now, and the share of the work done
+        if peaks_mib is not None:
+            tracemalloc.start()
+        t0 = time.perf_counter()
+        try:
+            return fn(*a, **k)
+        finally:
+            times[name] = time.perf_counter() - t0
+            if peaks_mib is not None:
+                peaks_mib[name] = tracemalloc.get_traced_memory()[1] / 2 ** 20
+                tracemalloc.stop()
+    return timed
 
 
 def default_n_sites(shape, pixels_per_site=DEFAULTS.pixels_per_site):
@@ -159,13 +180,7 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
                  "crop or downsample it")
     times = {}
     report = progress or (lambda frac, stage: None)
-
-    def timed(name, frac, fn, *a, **k):
-        report(frac, name)  # the stage that starts now, and the share of the work done
-        t0 = time.perf_counter()
-        out = fn(*a, **k)
-        times[name] = time.perf_counter() - t0
-        return out
+    timed = stage_runner(report, times)
 
     streaks = None
     if p.streak_correction:

@@ -1,7 +1,5 @@
 """The method in 3D (SPEC 9): a volume -> segmented tetrahedra and closed per-material
 surfaces, from the gray values at once (no label map first)."""
-import time
-import tracemalloc
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -15,13 +13,12 @@ from .errors import InputError, ParameterError
 from .labelling import CUT_KEYS
 from .levels import volume_levels
 from .params import AUTO, DEFAULTS, resolve
+from .pipeline import DENSITY_KEYS, stage_runner
 from .recursive_cut import order_by_gray, segment_triangles
 from .sites import initial_sites_3d
 from .surfaces import material_interfaces, material_surface, repair_pinched_edges
 from .tetra_gray import tetra_gray
 from .tetrahedra import perturb_slivers, tetra_quality, tetra_volumes
-
-DENSITY_KEYS = ("density_sigma_px", "density_floor", "density_saturation", "density_ridge")
 
 
 def default_n_sites_3d(shape, voxels_per_site=DEFAULTS.voxels_per_site):
@@ -146,18 +143,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     sp = check_spacing((1.0, 1.0, 1.0) if spacing is None else spacing)
     report = progress or (lambda frac, stage: None)
     times, peaks = {}, {}
-
-    def timed(name, frac, fn, *a, **k):
-        report(frac, name)
-        tracemalloc.start()
-        t0 = time.perf_counter()
-        try:
-            out = fn(*a, **k)
-        finally:
-            times[name] = time.perf_counter() - t0
-            peaks[name] = tracemalloc.get_traced_memory()[1] / 2 ** 20
-            tracemalloc.stop()
-        return out
+    timed = stage_runner(report, times, peaks)
 
     image = vol.astype(np.float64)
     scale, levels, pixel_sigma, _ = timed("levels", 0.0, volume_levels, image, p, 0)

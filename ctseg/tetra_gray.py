@@ -5,6 +5,7 @@ import numbers
 import numpy as np
 
 from ._tet_clip import _overlaps
+from ._validate import as_volume, check_spacing
 from .errors import InputError, ParameterError
 
 # how far (index units) a mesh vertex may stand outside the box of voxel centres
@@ -13,23 +14,10 @@ BOX_TOL = 1e-9
 
 def _as_volume(volume):
     """``volume`` as a finite float64 3D array with at least 2 voxels a side."""
-    try:
-        vol = np.asarray(volume)
-    except Exception as exc:  # e.g. ragged nested lists
-        raise InputError(f"volume: cannot be read as an array ({exc})") from None
-    if vol.dtype == object or not (np.issubdtype(vol.dtype, np.number) or vol.dtype == bool) \
-            or np.iscomplexobj(vol):
-        raise InputError(f"volume: expected real numbers, got dtype {vol.dtype}")
-    if vol.ndim != 3:
-        raise InputError(f"volume: expected a 3D array (nz, ny, nx), got shape {vol.shape}")
-    _check_shape(vol.shape, "volume")
-    vol = vol.astype(np.float64)
-    bad = ~np.isfinite(vol)
-    if bad.any():
-        k, j, i = np.argwhere(bad)[0]
-        raise InputError(f"volume: {int(bad.sum())} voxel(s) are NaN or infinite (first at "
-                         f"k={k}, j={j}, i={i})")
-    return vol
+    if np.ndim(volume) != 3:
+        raise InputError(f"volume: expected a 3D array (nz, ny, nx), got shape {np.shape(volume)}")
+    _check_shape(np.shape(volume), "volume")
+    return as_volume(volume).astype(np.float64)
 
 
 def _check_shape(shape, name="shape"):
@@ -48,13 +36,7 @@ def _check_shape(shape, name="shape"):
 
 def _corners(points, tetrahedra, shape, spacing):
     """(m, 4, 3) C-contiguous corners in index units, checked and clamped to the box."""
-    try:
-        sp = np.asarray(spacing, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ParameterError(f"spacing: expected 3 numbers, got {spacing!r}") from None
-    if sp.shape != (3,) or not np.all(np.isfinite(sp)) or np.any(sp <= 0):
-        raise ParameterError(f"spacing: expected 3 finite numbers > 0 (sx, sy, sz), got "
-                             f"{spacing!r}")
+    sp = check_spacing(spacing)
     try:
         pts = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):

@@ -15,7 +15,6 @@ from .params import AUTO, resolve
 from .checkpoint import Checkpoint
 from .pipeline import segment_image
 from .pipeline3d import segment_volume_3d
-from .raster import volume_labels  # noqa: F401  (transitional: callers move to ctseg.raster)
 from .resources import (LEVEL_BYTES_PER_VOXEL, RESULT_BYTES_PER_VOXEL, check_memory,
                         slice_bytes)
 

@@ -272,7 +272,11 @@ def polydata_to_arrays(poly):
         tri = conn.reshape(-1, 3).astype(np.int64)
     else:
         tri = np.zeros((0, 3), np.int64)
-    cd = poly.GetCellData()
-    arrays = {cd.GetArrayName(k): numpy_support.vtk_to_numpy(cd.GetArray(k))
-              for k in range(cd.GetNumberOfArrays())}
-    return np.array(pts), tri, arrays
+    return np.array(pts), tri, cell_arrays(poly)
+
+
+def cell_arrays(data):
+    """{name: numpy array} of a data set's cell arrays."""
+    cd = data.GetCellData()
+    return {cd.GetArrayName(k): numpy_support.vtk_to_numpy(cd.GetArray(k))
+            for k in range(cd.GetNumberOfArrays())}

@@ -14,7 +14,7 @@ from vtkmodules.vtkCommonDataModel import vtkPolyData
 from ctseg.errors import InputError
 from ctseg.geometry import ImageGeometry
 
-from .convert import _add_cell_array, _cells, _points
+from .convert import _add_cell_array, _cells, _points, cell_arrays
 
 
 def world_map(result, geometry=None):
@@ -130,7 +130,4 @@ def grid_to_arrays(grid):
         tets = conn.reshape(-1, 4).astype(np.int64)
     else:
         tets = np.zeros((0, 4), np.int64)
-    cd = grid.GetCellData()
-    arrays = {cd.GetArrayName(k): numpy_support.vtk_to_numpy(cd.GetArray(k))
-              for k in range(cd.GetNumberOfArrays())}
-    return np.array(pts), tets, arrays
+    return np.array(pts), tets, cell_arrays(grid)

@@ -14,7 +14,7 @@ from ctseg.geometry import AXES, ImageGeometry
 from ctseg.metrics import dice_per_label
 from ctseg.phantoms import make_phantom, make_volume
 from ctseg.triangulation import triangle_areas
-from ctseg.volume import volume_labels
+from ctseg.raster import volume_labels
 
 from conftest import disc_image
 
