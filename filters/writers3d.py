@@ -14,34 +14,30 @@ arrays ``material`` and ``gray``), ``.vtp`` (every material's closed surface in 
 XML PolyData with a ``material`` cell array), ``.stl`` (one closed binary STL per
 material, ``NAME_material<k>.stl``), ``.ply`` (binary; the closed surfaces with the
 material as face colour and face quality), ``.obj`` (one group and ``usemtl`` per
-material, colours in ``NAME.mtl``). The interface triangles go to a ``.vtp`` of their own
-(:func:`write_interfaces`).
+material, colours in ``NAME.mtl``); finite-element meshes ``.msh`` (Gmsh 4.1), ``.inp``
+(Abaqus) and ``.xdmf`` with element sets per material and facet sets per interface and
+box side (:mod:`ctseg.filters.fe_writers`). The interface triangles go to a ``.vtp`` of
+their own (:func:`write_interfaces`).
 """
 import os
 
 import numpy as np
 
-from ctseg.errors import InputError, MeshCheckError
+from ctseg.errors import MeshCheckError
 
 from .convert3d import (material_surfaces_to_polydata, surfaces_to_arrays,
                         tetra_segmentation_to_vtk, world_surfaces, world_tetrahedra)
+from .fe_writers import FE_FORMATS, write_fe_mesh
 from .writers import (_vtk_write, _write_obj, _write_ply, _write_stl, atomic_outputs,
                       check_output_path)
 
-TETRA_FORMATS = (".vtu", ".vtp", ".stl", ".ply", ".obj")
+TETRA_FORMATS = (".vtu", ".vtp", ".stl", ".ply", ".obj") + tuple(FE_FORMATS)
 """Output formats of a 3D segmentation."""
-
-LATER_FORMATS = {".msh": "Gmsh", ".inp": "Abaqus", ".xdmf": "XDMF"}
-"""Finite-element formats not written yet (a later issue)."""
 
 
 def check_tetra_output_path(path):
-    """``(path, extension)`` of a 3D output, or InputError (one line) for a finite-element
-    format not written yet, an unknown extension or an unwritable folder."""
-    ext = os.path.splitext(os.fspath(path))[1].lower()
-    if ext in LATER_FORMATS:
-        raise InputError(f"{path}: {LATER_FORMATS[ext]} ({ext}) finite-element meshes are not "
-                         f"written yet; use one of {', '.join(TETRA_FORMATS)}")
+    """``(path, extension)`` of a 3D output, or InputError (one line) for an unknown
+    extension or a missing or unwritable folder."""
     return check_output_path(path, TETRA_FORMATS)
 
 
@@ -121,12 +117,14 @@ def write_tetra_mesh(result, path, geometry=None, check=True):
     Raises
     ------
     InputError
-        An unknown or not yet written format, a missing or unwritable folder.
+        An unknown format, a missing or unwritable folder.
     MeshCheckError
         A check failed; nothing was written.
     """
     path, ext = check_tetra_output_path(path)
     checks = check_tetra_segmentation(result, geometry) if check else {}
+    if ext in FE_FORMATS:
+        return write_fe_mesh(result, path, geometry), checks
     if ext == ".vtu":
         from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
 

@@ -94,6 +94,30 @@ def test_3d_surface_formats(volume_files, tmp_path, ext):
     assert [os.path.basename(p) for p in report["outputs"]] == sorted(expected, key=lambda n: n.endswith(".mtl"))
 
 
+@pytest.mark.parametrize("ext", [".msh", ".inp", ".xdmf"])
+def test_3d_fe_formats(volume_files, tmp_path, ext):
+    """The pipeline's own mesh (world geometry with a flipped direction) through the CLI:
+    each FE file reopens with its elements, one set per material, none inverted."""
+    import meshio
+
+    out = str(tmp_path / f"m{ext}")
+    assert main(["mesh", str(volume_files / "v.nrrd"), "--mode", "3d", "-o", out, "--sites",
+                 "150", "--report", str(tmp_path / "r.json"), "-q"]) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert sorted(os.listdir(tmp_path)) == sorted([f"m{ext}", "r.json"])
+    mesh = meshio.read(out)
+    tets = mesh.cells_dict["tetra"]
+    assert len(tets) == report["n_tetrahedra"]
+    assert tetra_volumes(mesh.points, tets).min() > 0
+    if ext == ".msh":
+        names = {name for name, (_, dim) in mesh.field_data.items() if dim == 3}
+        assert names == {f"material_{k}" for k in range(report["n_materials"])}
+    elif ext == ".inp":
+        assert set(mesh.cell_sets) == {f"material_{k}" for k in range(report["n_materials"])}
+    else:
+        assert np.unique(mesh.cell_data["material"][0]).tolist() == list(range(report["n_materials"]))
+
+
 def test_report_parameters_reproduce_the_run(volume_files, tmp_path):
     cmd = ["mesh", str(volume_files / "v.npy"), "-q"]
     assert main(cmd + ["--mode", "3d", "--sites", "120", "-o", str(tmp_path / "a.vtu"),
@@ -156,9 +180,9 @@ def test_refused_spacing(tmp_path, capsys, spacing):
 @pytest.mark.parametrize("extra,words", [
     (["-o", "m.abc"], ["m.abc", "unknown output format", ".vtu"]),
     (["-o", "m.mlp"], ["unknown output format"]),
-    (["-o", "m.msh"], ["Gmsh", "not written yet"]),
-    (["-o", "m.inp"], ["Abaqus", "not written yet"]),
-    (["-o", "m.xdmf"], ["XDMF", "not written yet"]),
+    (["-o", "m.unv"], ["m.unv", "unknown output format", ".msh", ".inp", ".xdmf"]),
+    (["-o", "nowhere/m.msh"], ["does not exist"]),
+    (["-o", "in.npy/m.inp"], ["does not exist"]),
     (["-o", "nowhere/m.vtu"], ["does not exist"]),
     (["-o", "sub"], ["is a folder"]),
     (["-o", "in.npy/m.vtu"], ["does not exist"]),
