@@ -1,11 +1,13 @@
-"""3D Slicer scripted module: segment a CT volume into a triangle mesh with one material
-per triangle (ctseg, after Yang et al. 2014).
+"""3D Slicer scripted module: segment a CT volume into a mesh with one material per
+element (ctseg, after Yang et al. 2014): triangles slice by slice, or tetrahedra with a
+closed surface per material in 3D mode.
 
 The Widget only gathers parameters into the parameter node and calls the Logic
 (``CTSegLib/logic.py``), which holds all the work and runs without the GUI. Its fields are
 made from the parameter spec (:mod:`ctseg.params`, through the Logic's
 ``field_description``): a spin box with the spec's range per number ("auto" at 0 where
-the value may come from the data), a combo box per choice, a check box per switch.
+the value may come from the data), a combo box per choice (Mode: 'slices' or '3d'), a
+check box per switch.
 """
 import ctk
 import qt
@@ -25,10 +27,13 @@ class CTSeg(ScriptedLoadableModule):
         parent.dependencies = []
         parent.contributors = ["ctseg developers"]
         parent.helpText = (
-            "Segments a CT volume slice by slice into a triangle mesh whose small triangles "
-            "hug the material boundaries, one material per triangle (centroidal Voronoi "
-            "tessellation and recursive graph cut, Yang et al. 2014). Output: a model "
-            "coloured by material and a segmentation with one segment per material.")
+            "Segments a CT volume into a mesh whose small elements hug the material "
+            "boundaries, one material per element (centroidal Voronoi tessellation and "
+            "recursive graph cut, Yang et al. 2014). Mode 'slices': triangles slice by "
+            "slice; output a model coloured by material and a segmentation with one "
+            "segment per material. Mode '3d': tetrahedra; output a model of the "
+            "tetrahedra (cut in the slice views) and a segmentation whose segments are "
+            "ctseg's closed surfaces, one per material.")
         parent.acknowledgementText = "ctseg is GPL-3.0-or-later."
 
 
@@ -55,7 +60,7 @@ class CTSegWidget(ScriptedLoadableModuleWidget):
             if spec.group not in forms:
                 section = ctk.ctkCollapsibleButton()
                 section.text = GROUP_LABELS.get(spec.group, spec.group)
-                section.collapsed = spec.group != "sites"
+                section.collapsed = spec.group not in ("sites", "volume")  # volume: Mode
                 form.addRow(section)
                 forms[spec.group] = qt.QFormLayout(section)
             field = self._field(field_description(spec))
@@ -120,12 +125,17 @@ class CTSegWidget(ScriptedLoadableModuleWidget):
             node = self.logic.parameter_node()
             for name, field in self.fields.items():
                 node.SetParameter(name, self._text(name, field))
-            self.logic.run(self.volume.currentNode(), node, progress)
+            model, segmentation, result = self.logic.run(self.volume.currentNode(), node,
+                                                         progress)
+            segmentation.CreateClosedSurfaceRepresentation()  # the segments in 3D (slices mode)
+            slicer.util.resetThreeDViews()
+            self.progress.setFormat(f"{result.n_materials} materials %p%")
 
 
 class CTSegTest(ScriptedLoadableModuleTest):
     """Runs the Logic tests (plugin/slicer/test_slicer_logic.py's checks) in the
-    application: a simulated part with known truth, segmented and compared."""
+    application: simulated parts with known truth, segmented in slices mode and in 3D
+    mode and compared."""
 
     def runTest(self):
         import numpy as np
@@ -147,3 +157,32 @@ class CTSegTest(ScriptedLoadableModuleTest):
         dice = dice_per_label(volume_labels(result, p.image.shape), p.truth.astype(np.int64), 4)
         self.assertGreater(min(dice[0], dice[2], dice[3]), 0.93)
         self.delayDisplay(f"ctseg: Dice per material {np.round(dice, 3)}")
+        self.test_3d_mode()
+
+    def test_3d_mode(self):
+        import numpy as np
+
+        from ctseg.metrics import dice_per_label
+        from ctseg.phantoms3d import make_part_3d
+
+        slicer.mrmlScene.Clear(0)
+        spacing = (0.2, 0.2, 0.3)
+        p = make_part_3d(64, seed=0, spacing=spacing)
+        volume = slicer.util.addVolumeFromArray(p.image, ijkToRAS=np.diag([-0.2, -0.2, 0.3, 1.0]))
+        logic = CTSegLogic(slicer.mrmlScene)
+        node = logic.parameter_node()
+        node.SetParameter("Mode", "3d")
+        node.SetParameter("NumberOfMaterials", "4")
+        model, segmentation, result = logic.run(volume)
+        self.assertEqual(model.GetMesh().GetNumberOfCells(), len(result.tetrahedra))
+        seg = segmentation.GetSegmentation()
+        self.assertEqual(seg.GetNumberOfSegments(), 4)
+        self.assertEqual(seg.GetSourceRepresentationName(), "Closed surface")
+        labelmap = slicer.mrmlScene.AddNewNodeByClass("vtkMRMLLabelMapVolumeNode")
+        ids = [seg.GetNthSegmentID(k) for k in range(4)]
+        self.assertTrue(slicer.vtkSlicerSegmentationsModuleLogic.ExportSegmentsToLabelmapNode(
+            segmentation, ids, labelmap, volume))
+        lab = slicer.util.arrayFromVolume(labelmap).astype(np.int64) - 1
+        dice = dice_per_label(lab, p.truth.astype(np.int64), 4)
+        self.assertGreater(min(dice[0], dice[3]), 0.8)
+        self.delayDisplay(f"ctseg 3D: Dice per material {np.round(dice, 3)}")

@@ -2,6 +2,11 @@
 segmented mesh, coloured by material) and a segmentation node (one segment per material)
 out, parameters kept in a parameter node.
 
+The parameter ``Mode`` chooses the mesh: 'slices' (triangles slice by slice; the segments
+are the mesh rasterised on the volume's voxels, closed surfaces made by Slicer's
+converter) or '3d' (tetrahedra; the segments are ctseg's own closed surfaces, one per
+material, kept as the segmentation's source representation).
+
 Imports only MRML (``slicer``'s node classes) and ctseg, never qt, ctk or
 ``slicer.ScriptedLoadableModule``, so it runs in the full application and in PyPI's
 slicer-core alike (the tests use the latter). The parameters are those of
@@ -15,8 +20,10 @@ from vtkmodules.vtkCommonMath import vtkMatrix4x4
 import slicer
 
 from ctseg.errors import CTSegError, InputError, ParameterError
-from ctseg.filters import array_to_image, segment_array, segmentation_to_polydata
+from ctseg.filters import (array_to_image, segment_array, segmentation_to_polydata,
+                           tetra_segmentation_to_vtk)
 from ctseg.filters.convert import ImageGeometry, image_to_array
+from ctseg.filters.convert3d import triangles_polydata, world_surfaces
 from ctseg.filters.writers import material_colors
 from ctseg.params import AUTO, AUTO_NUMBER, SPECS, resolve
 from ctseg.raster import label_image, volume_labels
@@ -162,16 +169,27 @@ class CTSegLogic:
     def run(self, volume_node, parameter_node=None, progress=None):
         """Segment ``volume_node``; return ``(model_node, segmentation_node, result)``.
 
-        The model node holds the mesh in RAS (cell arrays ``material``, ``gray``,
-        ``slice``; shown coloured by material); the segmentation node holds one segment
-        per material, made from the mesh rasterised on the volume's voxels (binary
-        labelmap representation, closed surfaces by the registered converter).
-        ``progress(fraction, message)`` is called as the work goes on.
+        Mode 'slices': the model node holds the triangle mesh in RAS (cell arrays
+        ``material``, ``gray``, ``slice``); the segmentation node holds one segment per
+        material, made from the mesh rasterised on the volume's voxels (binary labelmap
+        representation, closed surfaces by the registered converter); ``result`` is a
+        SegmentedMesh or VolumeSegmentation.
+
+        Mode '3d': the model node holds the tetrahedra in RAS (a vtkUnstructuredGrid,
+        cell arrays ``material`` and ``gray``; shown cut in the slice views); the
+        segmentation node holds one segment per material whose source representation is
+        ctseg's closed surface of that material, in RAS; ``result`` is a
+        TetraSegmentation (spacing: the volume's).
+
+        Either way the model is coloured by material, segment k is named
+        ``material k (gray G)`` with material k's colour, and ``progress(fraction,
+        message)`` is called as the work goes on.
 
         Raises
         ------
         ctseg.errors.CTSegError
-            No image in the node, a bad parameter, or anything ctseg refuses.
+            No image in the node, a bad parameter, a single slice in mode '3d', or
+            anything ctseg refuses.
         """
         report = progress or (lambda fraction, message: None)
         image = volume_node.GetImageData() if volume_node is not None else None
@@ -182,15 +200,28 @@ class CTSegLogic:
         params = self.parameters(parameter_node)
         name = volume_node.GetName()
         report(0.0, f"segmenting {name}")
-        result = segment_array(arr, params, progress=lambda f, s: report(0.9 * f, s))
-        labels = volume_labels(result, arr.shape) if arr.ndim == 3 else None
-        mesh, _ = segmentation_to_polydata(result, geom)
+        result = segment_array(arr, params, spacing=geom.spacing,
+                               progress=lambda f, s: report(0.9 * f, s))
         report(0.9, "building the nodes")
-        model = self._model_node(mesh, f"{name} ctseg mesh", result.n_materials)
-        if labels is None:
-            labels = label_image(result.points, result.triangles, result.material, arr.shape)[None]
-        segmentation = self._segmentation_node(labels, volume_node, f"{name} ctseg segmentation",
-                                               result.material_gray)
+        if params.mode == "3d":
+            grid, _ = tetra_segmentation_to_vtk(result, geom)
+            model = self._model_node(grid, f"{name} ctseg tetrahedra", result.n_materials)
+            # the box of tetrahedra would hide everything in 3D: its cut shows in the slices
+            model.GetDisplayNode().SetVisibility3D(False)
+            model.GetDisplayNode().SetVisibility2D(True)
+            segmentation = self._surface_segmentation_node(
+                world_surfaces(result, geom), volume_node, f"{name} ctseg segmentation",
+                result.material_gray)
+        else:
+            labels = volume_labels(result, arr.shape) if arr.ndim == 3 else None
+            mesh, _ = segmentation_to_polydata(result, geom)
+            model = self._model_node(mesh, f"{name} ctseg mesh", result.n_materials)
+            if labels is None:
+                labels = label_image(result.points, result.triangles, result.material,
+                                     arr.shape)[None]
+            segmentation = self._segmentation_node(labels, volume_node,
+                                                   f"{name} ctseg segmentation",
+                                                   result.material_gray)
         report(1.0, "done")
         return model, segmentation, result
 
@@ -205,10 +236,11 @@ class CTSegLogic:
         return table
 
     def _model_node(self, mesh, name, n_materials):
+        """A model node of a vtkPolyData or vtkUnstructuredGrid, coloured by material."""
         model = slicer.vtkMRMLModelNode()
         model.SetName(name)
         self.scene.AddNode(model)
-        model.SetAndObservePolyData(mesh)
+        model.SetAndObserveMesh(mesh)
         display = slicer.vtkMRMLModelDisplayNode()
         self.scene.AddNode(display)
         display.SetActiveScalarName("material")
@@ -238,11 +270,45 @@ class CTSegLogic:
         if not slicer.vtkSlicerSegmentationsModuleLogic.ImportLabelmapToSegmentationNode(labelmap, segmentation):
             raise CTSegError("segmentation: Slicer could not import the material labels")
         seg = segmentation.GetSegmentation()
-        colours = material_colors(np.arange(len(material_gray))) / 255.0
         for k in range(seg.GetNumberOfSegments()):
             segment = seg.GetNthSegment(k)
             material = int(segment.GetLabelValue()) - 1
-            segment.SetName(f"material {material} (gray {material_gray[material]:.4g})")
-            segment.SetColor(*colours[material])
+            segment.SetName(segment_name(material, material_gray))
+            segment.SetColor(*segment_color(material))
         self.scene.RemoveNode(labelmap)
         return segmentation
+
+    def _surface_segmentation_node(self, surfaces, volume_node, name, material_gray):
+        """One segment per material from ctseg's closed surfaces ``(material, RAS points,
+        triangles)``, the closed surface being the segmentation's source representation;
+        binary labelmaps convert on the volume's voxel grid. The lowest-gray material
+        (the air around the part, whose surface includes the box) is hidden in 3D."""
+        register_segmentation_converters()
+        segmentation = slicer.vtkMRMLSegmentationNode()
+        segmentation.SetName(name)
+        self.scene.AddNode(segmentation)
+        segmentation.CreateDefaultDisplayNodes()
+        segmentation.SetReferenceImageGeometryParameterFromVolumeNode(volume_node)
+        to_surfaces = getattr(segmentation, "SetSourceRepresentationToClosedSurface", None) \
+            or segmentation.SetMasterRepresentationToClosedSurface  # Slicer before the "source" rename
+        to_surfaces()
+        display = segmentation.GetDisplayNode()
+        for material, points, triangles in surfaces:
+            segment_id = segmentation.AddSegmentFromClosedSurfaceRepresentation(
+                triangles_polydata(points, triangles, {}), segment_name(material, material_gray),
+                segment_color(material), f"material_{material}")
+            if not segment_id:
+                raise CTSegError(f"segmentation: Slicer refused the surface of material {material}")
+            if material == 0:
+                display.SetSegmentVisibility3D(segment_id, False)
+        return segmentation
+
+
+def segment_name(material, material_gray):
+    """The segment name of a material: 'material k (gray G)', G in the input's units."""
+    return f"material {material} (gray {material_gray[material]:.4g})"
+
+
+def segment_color(material):
+    """The segment colour (r, g, b in 0..1) of a material: ctseg's material colour."""
+    return tuple(float(c) for c in material_colors([material])[0] / 255.0)
