@@ -15,6 +15,11 @@ measured on a 512^3 volume: 2.0 million triangles)."""
 LEVEL_BYTES_PER_VOXEL = 48
 """Working memory per voxel of the slices that measure a volume's material levels."""
 
+VOLUME_3D_BYTES_PER_VOXEL = 400
+"""Peak resident memory of the 3D mode per voxel, with a 2x margin: benchmarks/volume3d.py
+measured 739 MiB for a 160^3 volume, 189 bytes per voxel with the input and the
+interpreter (benchmarks/results/volume3d.md)."""
+
 
 def available_bytes():
     """Memory the system can still give (MemAvailable), or None where unknown."""

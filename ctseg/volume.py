@@ -15,8 +15,8 @@ from .params import AUTO, resolve
 from .checkpoint import Checkpoint
 from .pipeline import segment_image
 from .pipeline3d import segment_volume_3d
-from .resources import (LEVEL_BYTES_PER_VOXEL, RESULT_BYTES_PER_VOXEL, check_memory,
-                        slice_bytes)
+from .resources import (LEVEL_BYTES_PER_VOXEL, RESULT_BYTES_PER_VOXEL, VOLUME_3D_BYTES_PER_VOXEL,
+                        check_memory, slice_bytes)
 
 @dataclass
 class VolumeSegmentation:
@@ -185,6 +185,10 @@ def segment_volume(volume, params=None, *, spacing=None, client=None, progress=N
         overrides["axis"] = "zyx"[slice_axis(overrides["axis"])]
     p = resolve(params, **overrides)
     if p.mode == "3d":
+        shape = np.shape(volume)
+        check_memory(int(np.prod(shape)) * VOLUME_3D_BYTES_PER_VOXEL,
+                     f"meshing a {' x '.join(map(str, shape))} volume in 3D",
+                     "crop or downsample it, or use slices mode")
         return segment_volume_3d(volume, p, spacing=spacing, progress=progress)
     vol = as_volume(volume)
     ax = slice_axis(p.axis)

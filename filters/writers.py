@@ -36,6 +36,8 @@ def material_colors(material):
 
 
 def check_output_path(path, ext_expected=None):
+    """``(path, lower-case extension)`` of an output file, or InputError (one line): a
+    folder, an extension not in ``ext_expected``, a missing or unwritable folder."""
     path = os.fspath(path)
     if os.path.isdir(path):
         raise InputError(f"{path}: is a folder; give a file name")
@@ -48,6 +50,13 @@ def check_output_path(path, ext_expected=None):
         raise InputError(f"{path}: the folder {folder} does not exist")
     if not os.access(folder, os.W_OK):
         raise InputError(f"{path}: the folder {folder} is not writable")
+    # os.access says yes to root on a read-only or virtual file system: try for real
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".ctseg-probe-", dir=folder)
+    except OSError as exc:
+        raise InputError(f"{path}: the folder {folder} is not writable ({exc.strerror})") from None
+    os.close(fd)
+    os.unlink(probe)
     return path, ext
 
 

@@ -168,6 +168,15 @@ def test_refused_volumes(tmp_path, capsys, name, array, words):
              *words)
 
 
+def test_too_large_for_memory_is_refused_before_the_work(tmp_path, capsys, monkeypatch):
+    import ctseg.resources
+
+    np.save(tmp_path / "in.npy", _vol())
+    monkeypatch.setattr(ctseg.resources, "available_bytes", lambda: 2 ** 16)  # 64 KiB free
+    _refused(tmp_path, capsys, [tmp_path / "in.npy", "--mode", "3d", "-o", tmp_path / "m.msh"],
+             "6 x 12 x 12 volume in 3D needs about", "GiB of memory", "slices mode")
+
+
 @pytest.mark.parametrize("spacing", [(0.1, -0.1, 0.3), (0.1, 0.0, 0.3)])
 def test_refused_spacing(tmp_path, capsys, spacing):
     import nrrd
@@ -183,6 +192,8 @@ def test_refused_spacing(tmp_path, capsys, spacing):
     (["-o", "m.unv"], ["m.unv", "unknown output format", ".msh", ".inp", ".xdmf"]),
     (["-o", "nowhere/m.msh"], ["does not exist"]),
     (["-o", "in.npy/m.inp"], ["does not exist"]),
+    (["-o", "/proc/m.msh"], ["/proc/m.msh", "not writable"]),  # refused even to root
+    (["-o", "m.vtu", "--surfaces", "/proc/s.vtp"], ["/proc/s.vtp", "not writable"]),
     (["-o", "nowhere/m.vtu"], ["does not exist"]),
     (["-o", "sub"], ["is a folder"]),
     (["-o", "in.npy/m.vtu"], ["does not exist"]),
