@@ -5,9 +5,10 @@ from scipy.ndimage import gaussian_filter1d, uniform_filter
 
 from ._validate import as_image
 from .density import density_map
-from .errors import ParameterError
 from .geometry import slice_axis, volume_slice
 from .intensity import gray_scale, rescale_gray
+from .levels_auto import (FLAT_TRUST_FRACTION, clipped_extremes, level_report, level_sample,
+                          low_gradient_pixels, otsu_candidates, otsu_thresholds)
 from .params import AUTO, DEFAULTS, check
 
 LEVEL_KEYS = ("flat_sigma_px", "density_floor", "density_saturation", "merge_k", "merge_rel",
@@ -39,61 +40,6 @@ def weighted_spread(values, weights):
     if keep.sum() < 2:
         return 0.0
     return float(np.sqrt(np.cov(v[keep], aweights=w[keep])))
-
-
-def otsu_thresholds(values, weights, k):
-    """Multi-level Otsu: the ``k - 1`` thresholds that maximise the between-class variance
-    of the weighted values (exact, by dynamic programming over a 1024-bin histogram); a
-    value belongs to class ``searchsorted(thresholds, value)``.
-
-    Raises
-    ------
-    ParameterError
-        Fewer than ``k`` distinct values.
-
-    Example
-    -------
-    >>> t = otsu_thresholds([10, 11, 12, 50, 51, 90, 91], np.ones(7), 3)
-    >>> np.searchsorted(t, [10, 11, 12, 50, 51, 90, 91]).tolist()
-    [0, 0, 0, 1, 1, 2, 2]
-    """
-    v = np.asarray(values, float)
-    w = np.asarray(weights, float)
-    distinct = np.unique(v)
-    if len(distinct) < k:
-        raise ParameterError(f"n_materials: asked for {k} materials but the gray values hold "
-                             f"only {len(distinct)} distinct value(s)")
-    n_bins = 1024
-    lo, hi = float(distinct[0]), float(distinct[-1])
-    idx = np.minimum(((v - lo) / (hi - lo) * n_bins).astype(int), n_bins - 1)
-    hist = np.bincount(idx, w, n_bins)
-    centre = lo + (np.arange(n_bins) + 0.5) * (hi - lo) / n_bins
-    c0 = np.concatenate([[0.0], np.cumsum(hist)])
-    c1 = np.concatenate([[0.0], np.cumsum(hist * centre)])
-
-    def score(a, b):  # W * mean^2 of bins a..b-1 (the between-class term to maximise)
-        m = np.broadcast_to(c0[b] - c0[a], np.broadcast(a, b).shape)
-        s = np.broadcast_to((c1[b] - c1[a]) ** 2, m.shape)
-        return np.divide(s, m, out=np.full(m.shape, -np.inf), where=m > 0)
-
-    occupied = np.flatnonzero(hist > 0)
-    if len(occupied) < k:
-        raise ParameterError(f"n_materials: asked for {k} materials but the gray values fall "
-                             f"in only {len(occupied)} distinct level(s)")
-    cuts = np.unique(np.concatenate([occupied, occupied + 1]))  # class bounds worth trying
-    best = score(0, cuts)  # one class from bin 0 to each cut
-    back = []
-    for _ in range(k - 1):
-        table = best[:, None] + score(cuts[:, None], cuts[None, :])
-        table[cuts[:, None] >= cuts[None, :]] = -np.inf
-        back.append(np.argmax(table, axis=0))
-        best = table.max(axis=0)
-    j = int(np.flatnonzero(cuts == n_bins)[0])
-    bounds = []
-    for b in reversed(back):
-        j = int(b[j])
-        bounds.append(cuts[j])
-    return np.sort(lo + np.array(bounds, float) * (hi - lo) / n_bins)
 
 
 def material_modes(gray, area, bandwidth, min_area, separation, n_modes=None):
@@ -284,13 +230,34 @@ def material_levels(images, scale, *, flat_sigma_px=DEFAULTS.flat_sigma_px,
                     merge_rel=DEFAULTS.merge_rel, merge_floor_255=DEFAULTS.merge_floor_255,
                     merge_threshold_255=DEFAULTS.merge_threshold_255,
                     level_min_fraction=DEFAULTS.level_min_fraction,
-                    n_materials=DEFAULTS.n_materials):
+                    n_materials=DEFAULTS.n_materials, report=None):
     """Material gray levels (0-255 scale) seen in one slice or in a stack of slices.
 
     The modes of the histogram of the pixels away from edges
     (:func:`pixel_material_levels` on :func:`flat_pixels`). Given a stack, the pixels of
     all its slices count together, so every slice of a volume is labelled against the
     same levels and material numbers agree across slices.
+
+    Two rules beyond that (neither changes a scan whose flat pixels can be trusted and
+    whose data are not clipped):
+
+    * Clipped data (:func:`clipped_extremes`): the voxels at a clipped extreme are a
+      material of their own, at their gray: that gray replaces every level found within
+      ``max(merge_floor_255, merge_k * sigma)`` of it (the clipped material's unclipped
+      tail), or is added; with ``n_materials`` it counts as one of them.
+    * Untrusted flat pixels: when they are fewer than 16, or at least
+      :data:`FLAT_TRUST_FRACTION` of all pixels (the density map found no edges, as on
+      granular and porous scans where nearly every pixel is partial volume), or when they
+      give a single level (n_materials 'auto' only), the levels are instead the modes, by
+      the same rule (separation ``max(merge_floor_255, merge_k * sigma) + merge_rel *
+      gray``, valley below half the lower peak, ``level_min_fraction``), of the
+      low-gradient pixels (:func:`low_gradient_pixels`), whose noise sigma is then not
+      inflated by partial volume; clipped voxels are left out of them. With a single
+      level the new levels are used only if they are more than one. Where fewer than 16
+      pixels are low-gradient (quantized or windowed data), multi-level Otsu of all the
+      pixels gives the levels instead: k the largest, up to 6, for which
+      every k' <= k keeps adjacent class means at least that separation apart (sigma
+      from the flat pixels), used if it is more levels than the flat pixels gave.
 
     Parameters
     ----------
@@ -301,6 +268,14 @@ def material_levels(images, scale, *, flat_sigma_px=DEFAULTS.flat_sigma_px,
         Define the flat pixels (:func:`flat_pixels`).
     merge_k, merge_rel, merge_floor_255, merge_threshold_255, level_min_fraction, n_materials
         As in :func:`pixel_material_levels`.
+    report : dict, optional
+        Filled with the evidence: ``method`` ('flat_pixels', 'low_gradient',
+        'otsu_all_pixels'), ``reason`` (why the flat pixels were not trusted),
+        ``criterion``, ``flat_fraction``, ``flat_levels_255``, ``low_gradient_fraction``,
+        ``k_candidates`` (multi-level Otsu of the pixels used, for k = 1..6, with the
+        smallest gap between adjacent class means over the separation the rule asks for),
+        ``levels_255``, ``sigma_255``, ``clipped``, ``clipped_fraction``,
+        ``clipped_low_fraction``, ``clipped_high_fraction``.
 
     Returns
     -------
@@ -320,10 +295,68 @@ def material_levels(images, scale, *, flat_sigma_px=DEFAULTS.flat_sigma_px,
     g255 = np.stack([rescale_gray(sl, scale=scale)[0] for sl in stack])
     flat = np.stack([flat_pixels(sl, flat_sigma_px, density_floor, density_saturation)
                      for sl in stack])
-    return pixel_material_levels(g255, flat, merge_k=merge_k, merge_rel=merge_rel,
-                                 merge_floor_255=merge_floor_255,
-                                 merge_threshold_255=merge_threshold_255,
-                                 level_min_fraction=level_min_fraction, n_materials=n_materials)
+    kw = dict(merge_k=merge_k, merge_rel=merge_rel, merge_floor_255=merge_floor_255,
+              merge_threshold_255=merge_threshold_255, level_min_fraction=level_min_fraction)
+    n_mat = check("n_materials", n_materials)
+    clip_lo, clip_hi = clipped_extremes(stack)
+    clipped = [m for m in (clip_lo, clip_hi) if m.any()]
+    keep = ~(clip_lo | clip_hi)
+    n_rest = n_mat if n_mat == AUTO else n_mat - len(clipped)
+    if n_rest != AUTO and n_rest < 1:  # asked for fewer materials than the clipped ends
+        clipped, keep, n_rest = [], np.ones(stack.shape, bool), n_mat
+    # the levels of the flat pixels, exactly as ever
+    if n_mat == AUTO or not clipped:
+        levels, sigma = pixel_material_levels(g255, flat, n_materials=n_mat, **kw)
+    else:  # exactly n_materials: the clipped ends count among them
+        levels, sigma = pixel_material_levels(g255, flat & keep, n_materials=n_rest, **kw)
+    flat_levels = levels
+    n_flat = int(flat.sum())
+    frac = n_flat / flat.size
+    reason = None
+    if n_flat < 16:
+        reason = f"only {n_flat} flat pixels"
+    elif frac >= FLAT_TRUST_FRACTION:
+        reason = (f"{frac:.1%} of the pixels are flat: the density map found no edges, so "
+                  f"partial-volume pixels counted as flat")
+    elif n_mat == AUTO and len(levels) < 2:
+        reason = "the flat pixels give a single level"
+    method, low, k_cand = "flat_pixels", None, None
+    base = max(merge_floor_255, merge_k * sigma)
+    if reason is not None:
+        # the clipped voxels are left out: they would make the noise look like zero
+        low = low_gradient_pixels(g255, flat_sigma_px, mask=keep) & keep
+        if low.sum() >= 16:
+            lv2, sig2 = pixel_material_levels(g255, low, n_materials=n_rest, **kw)
+            if reason != "the flat pixels give a single level" or len(lv2) + len(clipped) > 1:
+                levels, sigma, method = lv2, sig2, "low_gradient"
+                base = max(merge_floor_255, merge_k * sigma)
+        elif n_mat == AUTO and merge_threshold_255 == AUTO:
+            # too few low-gradient pixels (quantized or windowed data): multi-level Otsu
+            # of all the pixels, k the largest whose adjacent class means all keep the
+            # separation the rule asks for
+            sm = level_sample(g255)
+            k_cand = otsu_candidates(sm, lambda g: base + merge_rel * g)
+            k_ok = 1
+            for c in k_cand[1:]:
+                if c["min_gap_over_separation"] < 1.0:
+                    break
+                k_ok = c["k"]
+            if k_ok > len(levels):
+                levels, method = np.array(k_cand[k_ok - 1]["levels_255"]), "otsu_all_pixels"
+    if report is not None:
+        if k_cand is None:
+            sel = {"low_gradient": low, "flat_pixels": flat if n_flat >= 16 else None}[method]
+            sm = level_sample(g255, sel)
+            sep = (lambda g: base + merge_rel * g) if merge_threshold_255 == AUTO \
+                else (lambda g: merge_threshold_255)
+            k_cand = otsu_candidates(sm, sep)
+    clip_levels = [float(np.mean(g255[m])) for m in clipped]
+    for c in clip_levels:  # a clipped end is a material of its own, at its gray
+        levels = np.sort(np.append(levels[np.abs(levels - c) >= base], c))
+    if report is not None:
+        report.update(level_report(method, reason, flat, flat_levels, low, k_cand, levels,
+                                   sigma, clip_lo, clip_hi, clip_levels))
+    return levels, sigma
 
 
 LEVEL_SAMPLE_VOXELS = 1 << 25

@@ -13,6 +13,7 @@ from .density import density_map
 from .errors import ParameterError
 from .intensity import estimate_noise, rescale_gray
 from .labelling import label_mesh
+from .levels import LEVEL_KEYS, material_levels
 from .params import AUTO, DEFAULTS, resolve
 from .resources import check_memory, slice_bytes
 from .sites import initial_sites
@@ -72,7 +73,10 @@ class SegmentedMesh:
     adjacency : (k, 2) int64 ndarray, adjacent triangle pairs
     diagnostics : dict
         ``times_s`` (per-stage wall time), ``cvt_energy`` (history), ``lloyd_iterations``,
-        ``graphcut_calls`` and the parameters used.
+        ``graphcut_calls``, the parameters used, and ``levels``: how the material levels
+        were found, with the evidence (:func:`ctseg.levels.material_levels`'s report:
+        ``method``, ``reason``, ``k_candidates``, ``criterion``, ``clipped`` and the
+        clipped fraction; ``{'method': 'given'}`` with ``levels_255``).
     density, cvt_labels : ndarray
         The density map and the final Voronoi regions (for figures).
     corrected_image : ndarray or None
@@ -209,6 +213,11 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
                            mesh.adjacency, material)
     report(1.0, "done")
     seg = labels.segmentation
+    if levels_255 is None:  # how the levels were found (label_mesh found them the same way)
+        level_report = {}
+        material_levels(img, scale, report=level_report, **{k: getattr(p, k) for k in LEVEL_KEYS})
+    else:
+        level_report = {"method": "given", "levels_255": [float(v) for v in levels_255]}
     diagnostics = {
         "image_shape": list(img.shape),
         "n_sites": int(n_sites),
@@ -222,6 +231,7 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
         "step_threshold_255": seg.step_threshold,
         "material_noise_255": labels.pixel_sigma,
         "material_levels_255": [float(v) for v in labels.levels_255],
+        "levels": level_report,
         "gray_rescale": {"offset": scale[0], "factor": scale[1]},
         "times_s": times,
         "total_time_s": float(sum(times.values())),

@@ -24,6 +24,7 @@ from ctseg.params import SPECS  # noqa: E402
 from ctseg.phantoms import make_volume  # noqa: E402
 
 SPACING = (0.2, 0.2, 0.5)
+PHANTOM_SEED_3D = 0  # the phantom's shapes (not ctseg's seed parameter)
 ORIGIN = (10.0, -20.0, 5.0)
 
 
@@ -187,7 +188,7 @@ def loaded3d(tmp_path_factory):
 
     from ctseg.phantoms3d import make_part_3d
 
-    p = make_part_3d(64, seed=0, spacing=SPACING_3D)
+    p = make_part_3d(64, seed=PHANTOM_SEED_3D, spacing=SPACING_3D)
     scene, volume = _read_nrrd(p.image, SPACING_3D, ORIGIN_3D, tmp_path_factory.mktemp("slicer3d"),
                                "part3d")
     logic = CTSegLogic(scene)

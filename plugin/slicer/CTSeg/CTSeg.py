@@ -18,6 +18,8 @@ from slicer.ScriptedLoadableModule import (ScriptedLoadableModule, ScriptedLoada
 from CTSegLib.logic import (GROUP_LABELS, PARAMETERS, CTSegLogic, field_description,
                             parameter_text)
 
+PHANTOM_SEED_3D = 0  # the self-test phantom's shapes (not ctseg's seed parameter)
+
 
 class CTSeg(ScriptedLoadableModule):
     def __init__(self, parent):
@@ -167,7 +169,7 @@ class CTSegTest(ScriptedLoadableModuleTest):
 
         slicer.mrmlScene.Clear(0)
         spacing = (0.2, 0.2, 0.3)
-        p = make_part_3d(64, seed=0, spacing=spacing)
+        p = make_part_3d(64, seed=PHANTOM_SEED_3D, spacing=spacing)
         volume = slicer.util.addVolumeFromArray(p.image, ijkToRAS=np.diag([-0.2, -0.2, 0.3, 1.0]))
         logic = CTSegLogic(slicer.mrmlScene)
         node = logic.parameter_node()
