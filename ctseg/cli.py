@@ -36,7 +36,8 @@ no partial file.
 3D mode (--mode 3d, a volume only): the same method on the voxels, with the file's
 spacing. Outputs: .vtu (tetrahedra with 'material' and 'gray'), .vtp (every material's
 closed surface, with 'material'), .stl (one closed STL per material), .ply and .obj (the
-closed surfaces coloured by material); --surfaces OUT.vtp writes the interface triangles
+closed surfaces coloured by material), and finite-element meshes .msh (Gmsh 4.1, physical
+groups per material, interface and box side), .inp (Abaqus) and .xdmf; --surfaces OUT.vtp writes the interface triangles
 ('material_a', 'material_b', normals from a to b). Every closed surface is checked
 (closed, manifold, outward, not self-intersecting, enclosing its tetrahedra's volume)
 before anything is written.
@@ -325,7 +326,7 @@ def build_parser():
     m.add_argument("input", help="image file or folder (see above)")
     m.add_argument("-o", "--output", required=True,
                    help="output mesh: .vtp, .vtu, .ply, .stl, .obj or .mlp (3D mode: .vtu, "
-                        ".vtp, .stl, .ply or .obj)")
+                        ".vtp, .stl, .ply, .obj, or FE: .msh, .inp, .xdmf)")
     m.add_argument("--boundary", help="also write the material boundary polylines (.vtp)")
     m.add_argument("--surfaces", help="3D mode: also write the interface triangles (.vtp)")
     _add_parameter_options(m)
