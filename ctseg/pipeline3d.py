@@ -1,37 +1,23 @@
 """The method in 3D (SPEC 9): a volume -> segmented tetrahedra and closed per-material
-surfaces, from the gray values at once (no label map first)."""
+surfaces, from the gray values at once (no label map first).
+
+:func:`segment_volume_3d` runs the stages of :mod:`ctseg.stages3d` in order (the VTK stage
+filters call the same functions one at a time)."""
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ._validate import as_volume, check_spacing
 from .beam_hardening import correct_streaks
-from .blur import blur_corrected_gray_3d, region_levels
-from .cvt3d import lloyd_cvt_3d
-from .density import density_volume
-from .errors import InputError, ParameterError
-from .labelling import CUT_KEYS
+from .errors import InputError
 from .levels import volume_levels
-from .params import AUTO, DEFAULTS, resolve
-from .pipeline import DENSITY_KEYS, stage_runner
-from .recursive_cut import order_by_gray, segment_triangles
-from .sites import initial_sites_3d
-from .surfaces import material_interfaces, material_surface, repair_pinched_edges
+from .params import resolve
+from .pipeline import stage_runner
+from .stages3d import (cvt_sites_3d, default_n_sites_3d, density_3d,  # noqa: F401 (re-export)
+                       label_tetrahedra, n_sites_3d, tetrahedra_3d)
+from .surfaces import material_interfaces, material_surface
 from .tetra_gray import tetra_gray
-from .tetrahedra import perturb_slivers, tetra_quality, tetra_volumes
-
-
-def default_n_sites_3d(shape, voxels_per_site=DEFAULTS.voxels_per_site):
-    """Default number of sites in 3D: one per ``voxels_per_site`` voxels, at least 64 and
-    at most one per voxel.
-
-    Example
-    -------
-    >>> default_n_sites_3d((64, 64, 64), voxels_per_site=256)
-    1024
-    """
-    n = int(np.prod([int(s) for s in shape]))
-    return int(min(n, max(64, round(n / voxels_per_site))))
+from .tetrahedra import tetra_quality
 
 
 @dataclass
@@ -84,7 +70,8 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     tetrahedra, slivers perturbed away (9.4, :func:`ctseg.tetrahedra.perturb_slivers`) ->
     exact tetrahedron gray (9.5) -> recursive graph cut on the
     tetrahedron graph with the levels and rules of 2D (9.6) -> interfaces and closed
-    surfaces per material (9.7).
+    surfaces per material (9.7). Each stage is a function of :mod:`ctseg.stages3d`, which
+    the VTK stage filters call too.
 
     Parameters
     ----------
@@ -157,56 +144,15 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
                 streak_weights.append(float(fix.weight))
             return out
         image = timed("streak_correction", 0.02, correct)
-    n_sites = p.n_sites
-    if n_sites == AUTO:
-        n_sites = default_n_sites_3d(image.shape, p.voxels_per_site)
-    if n_sites > image.size:
-        raise ParameterError(f"n_sites: {n_sites} sites for a volume of {image.size} voxels")
-    rho = timed("density", 0.05, density_volume, image, sp,
-                **{k: getattr(p, k) for k in DENSITY_KEYS})
-    sites0 = timed("initial_sites", 0.1, initial_sites_3d, rho, n_sites, sp, init=p.init,
-                   seed=p.seed, ward_block_px=p.ward_block_px)
-    cvt = timed("cvt", 0.2, lloyd_cvt_3d, rho, sites0, sp, tol_px=p.tol_px,
-                max_iter=p.max_iter,
-                progress=lambda it, n: report(0.2 + 0.5 * it / max(n, 1), "cvt"))
-    box = (np.array(image.shape[::-1], float) - 1.0) * sp
-    _, mesh, slivers = timed("tetrahedra", 0.7, perturb_slivers, cvt.sites, box,
-                             p.sliver_min_dihedral_deg, p.sliver_rounds, seed=p.seed)
+    n_sites = n_sites_3d(image.shape, p)
+    rho = timed("density", 0.05, density_3d, image, p, sp)
+    cvt = cvt_sites_3d(rho, p, sp, n_sites=n_sites, timed=timed,
+                       progress=lambda it, n: report(0.2 + 0.5 * it / max(n, 1), "cvt"))
+    mesh, slivers = timed("tetrahedra", 0.7, tetrahedra_3d, cvt.sites, image.shape, p, sp)
     gray = timed("tetra_gray", 0.75, tetra_gray, image, mesh.points, mesh.tetrahedra, sp)
-    offset, factor = scale
-    volume_vox = tetra_volumes(mesh.points, mesh.tetrahedra) / float(np.prod(sp))
-    cent = mesh.points[mesh.tetrahedra].mean(axis=1)
-
-    cut = {k: getattr(p, k) for k in CUT_KEYS}
-    f255 = np.clip((gray - offset) * factor, 0.0, 255.0)
-    # interior: most of the element's voxels are flat (the un-sharpened density below
-    # half its range, as the flat pixels that measure the levels)
-    strength = density_volume(image, sp, density_sigma_px=p.flat_sigma_px,
-                              density_floor=p.density_floor,
-                              density_saturation=p.density_saturation, density_ridge=0.0)
-    flat = (strength - p.density_floor) < 0.5
-    interior = tetra_gray(flat.astype(np.float64), mesh.points, mesh.tetrahedra, sp) >= 0.5
-    cut["interior"] = interior
-    # the first pass without the thin-layer rules: a band of blurred-edge elements with an
-    # intermediate gray must not predict a layer to the blur correction
-    seg = timed("graphcut", 0.8, segment_triangles, f255, volume_vox, mesh.adjacency, cent,
-                levels=levels, thin_layers=not p.blur_correction, **cut)
-    blur_px = None
-    if p.blur_correction and len(seg.mode_gray) > 1:
-        def sharpen():
-            level = region_levels(seg.material, f255, volume_vox, mesh.adjacency)
-            return blur_corrected_gray_3d(f255, mesh.points, mesh.tetrahedra, level,
-                                          (image - offset) * factor, sp,
-                                          blur_min_self_weight=p.blur_min_self_weight,
-                                          blur_max_px=p.blur_max_px)
-        f_sharp, blur_px = timed("blur_correction", 0.85, sharpen)
-        seg = timed("graphcut_2", 0.88, segment_triangles, np.clip(f_sharp, 0.0, 255.0),
-                    volume_vox, mesh.adjacency, cent, levels=levels, **cut)
-    material = np.searchsorted(levels, seg.mode_gray)[seg.material]
-    material, relabelled = timed("manifold_repair", 0.9, repair_pinched_edges, mesh, material,
-                                 volume_vox)
-    # materials numbered by level; those no tetrahedron holds are dropped from the count
-    material, mat_gray, used = order_by_gray(material, gray, volume_vox)
+    labels = label_tetrahedra(image, mesh, gray, p, sp, levels=(scale, levels, pixel_sigma),
+                              timed=timed)
+    material, mat_gray = labels.material, labels.material_gray
     faces, mat_a, mat_b = material_interfaces(mesh, material)
     report(0.95, "surfaces")
     surfaces = timed("surfaces", 0.95, lambda: [material_surface(mesh, material, k)
@@ -225,7 +171,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "material_gray": [float(v) for v in mat_gray],
         "material_levels_255": [float(v) for v in levels],
         "material_noise_255": float(pixel_sigma),
-        "gray_rescale": {"offset": float(offset), "factor": float(factor)},
+        "gray_rescale": {"offset": float(scale[0]), "factor": float(scale[1])},
         "times_s": times,
         "peak_memory_mib": peaks,
         "total_time_s": float(sum(times.values())),
@@ -233,9 +179,9 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "lloyd_iterations": int(cvt.n_iter),
         "lloyd_converged": bool(cvt.converged),
         "empty_regions": int(cvt.empty_regions),
-        "graphcut_calls": int(seg.graphcut_calls),
-        "blur_px": blur_px,
-        "relabelled_for_manifold": int(relabelled),
+        "graphcut_calls": labels.graphcut_calls,
+        "blur_px": labels.blur_px,
+        "relabelled_for_manifold": labels.relabelled,
         "element_quality": quality,
         "slivers_left": int(slivers),
         "streak_weights": streak_weights,
@@ -245,8 +191,8 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "parameters": p.to_dict(),
     }
     return TetraSegmentation(points=mesh.points, tetrahedra=mesh.tetrahedra,
-                             material=material.astype(np.int64), gray=gray,
+                             material=material, gray=gray,
                              adjacency=mesh.adjacency, interfaces=faces,
                              interface_materials=np.column_stack([mat_a, mat_b]),
-                             surfaces=surfaces, material_gray=np.asarray(mat_gray, float),
+                             surfaces=surfaces, material_gray=mat_gray,
                              spacing=sp, shape=tuple(vol.shape), diagnostics=diagnostics)

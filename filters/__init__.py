@@ -15,7 +15,7 @@ from .base import CTSegAlgorithm
 from .density import DensityMapFilter
 from .streaks import MetalStreakFilter
 from .sites import CVTSitesFilter
-from .triangulation import DelaunayMeshFilter
+from .triangulation import DelaunayMeshFilter, DelaunayTetraFilter
 from .triangle_gray import TriangleGrayFilter
 from .graphcut import GraphCutSegmentFilter
 from .boundary import MaterialBoundaryFilter
@@ -30,5 +30,6 @@ __all__ = ["ImageGeometry", "image_to_array", "array_to_image", "mesh_to_polydat
            "write_interfaces", "check_tetra_segmentation", "read_unstructured_grid",
            "TETRA_FORMATS", "CTSegAlgorithm",
            "MetalStreakFilter", "DensityMapFilter", "CVTSitesFilter", "DelaunayMeshFilter",
+           "DelaunayTetraFilter",
            "TriangleGrayFilter", "GraphCutSegmentFilter", "MaterialBoundaryFilter",
            "CTSegmentFilter", "segment_array"]

@@ -1,50 +1,67 @@
-"""Stages 6-7 as a VTK filter: mesh with ``gray`` + image -> one material per triangle."""
-from vtkmodules.vtkCommonDataModel import vtkPolyData
-
+"""Stages 6-7 as a VTK filter: mesh with ``gray`` + image -> one material per element
+(triangles over a slice, or tetrahedra over a volume)."""
 from ctseg.errors import InputError
 from ctseg.labelling import label_mesh
+from ctseg.stages3d import label_tetrahedra, tetra_mesh
 from ctseg.triangulation import triangle_mesh
 
-from .base import CTSegAlgorithm, spec_names
-from .convert import _add_cell_array, _field_array, mesh_index_coordinates, polydata_to_arrays
+from .base import spec_names
+from .convert import mesh_index_coordinates
+from .triangle_gray import MeshAndImageFilter
+
+# this filter's progress when each step of ctseg.stages3d.label_tetrahedra starts
+_STEPS_3D = {"graphcut": 0.05, "blur_correction": 0.45, "graphcut_2": 0.6,
+             "manifold_repair": 0.85}
 
 
-class GraphCutSegmentFilter(CTSegAlgorithm):
-    """Recursive graph cut of the triangles into materials (:func:`ctseg.label_mesh`,
-    SPEC 6-7).
+class GraphCutSegmentFilter(MeshAndImageFilter):
+    """Recursive graph cut of the elements into materials (SPEC 6-7 and 9.6).
 
-    Input 0: the mesh with a ``gray`` cell array (TriangleGrayFilter's output); input 1:
-    the one-slice vtkImageData, whose flat pixels give the material gray levels. Output: the
-    mesh with a ``material`` cell array (0..K-1 by ascending mean gray) and field data
-    ``material_gray``. Parameters: what ``label_mesh`` reads (``ctseg params``): the
-    levels, graphcut and recursion groups (NumberOfMaterials, Lambda, Beta, ...),
-    DensityFloor and DensitySaturation (which find the flat pixels), and the blur
-    correction (BlurCorrection, BlurMinSelfWeight, BlurMax).
+    Input 0: the mesh with a ``gray`` cell array (TriangleGrayFilter's output): triangles
+    (vtkPolyData) over a slice or tetrahedra (vtkUnstructuredGrid) over a volume; input 1:
+    the vtkImageData, the slice or the volume, whose flat pixels give the material gray
+    levels. Triangles: :func:`ctseg.label_mesh`, as the slices mode labels a slice.
+    Tetrahedra: :func:`ctseg.stages3d.label_tetrahedra` with the image's spacing, as the 3D
+    mode labels them (the volume's levels, interior elements by their flat voxels, the
+    blur correction in 3D, pinched edges repaired so that every material's surface is
+    manifold). The 3D stage chain has no streak correction (MetalStreakFilter takes one
+    slice): it gives CTSegmentFilter's Mode '3d' result with StreakCorrection off.
+
+    Output: the mesh (of input 0's type) with a ``material`` cell array (0..K-1 by
+    ascending mean gray) and field data ``material_gray`` (input units); tetrahedra also
+    ``relabelled_for_manifold``. Parameters: what the labelling reads (``ctseg params``):
+    the levels, graphcut and recursion groups (NumberOfMaterials, Lambda, Beta, ...; not
+    WeightByEdgeLength for tetrahedra), DensityFloor and DensitySaturation (which find
+    the flat pixels), and the blur correction (BlurCorrection, BlurMinSelfWeight,
+    BlurMax).
     """
 
     PARAMETERS = spec_names("levels", "graphcut", "recursion", names=(
         "density_floor", "density_saturation", "blur_correction", "blur_min_self_weight",
         "blur_max_px"))
 
-    def __init__(self):
-        super().__init__(n_inputs=2, input_type="vtkDataObject", output_type="vtkPolyData")
-
-    def FillInputPortInformation(self, port, info):
-        info.Set(self.INPUT_REQUIRED_DATA_TYPE(), "vtkPolyData" if port == 0 else "vtkImageData")
-        return 1
-
-    def _request(self, request, in_info, out_info):
-        mesh_in = vtkPolyData.GetData(in_info[0], 0)
-        arr, geom, _ = self._input_slice(in_info, port=1)
-        xyz, tri, arrays = polydata_to_arrays(mesh_in)
+    @staticmethod
+    def _gray(arrays):
         if "gray" not in arrays:
             raise InputError("mesh: no 'gray' cell array; connect a TriangleGrayFilter first")
-        mesh = triangle_mesh(mesh_index_coordinates(xyz, geom, arr.shape), tri)
-        self.UpdateProgress(0.0)
-        labels = label_mesh(arr, mesh, arrays["gray"], self.params)
-        out = self._output_poly(out_info)
-        out.ShallowCopy(mesh_in)
-        _add_cell_array(out, labels.material.astype("int32"), "material")
-        out.GetCellData().SetActiveScalars("material")
-        _field_array(out, "material_gray", labels.material_gray)
-        self.UpdateProgress(1.0)
+        return arrays["gray"]
+
+    def _slice(self, image, geometry, xyz, triangles, arrays):
+        gray = self._gray(arrays)
+        mesh = triangle_mesh(mesh_index_coordinates(xyz, geometry, image.shape), triangles)
+        labels = label_mesh(image, mesh, gray, self.params)
+        return ({"material": labels.material.astype("int32")},
+                {"material_gray": labels.material_gray})
+
+    def _volume(self, volume, spacing, points, tetrahedra, arrays):
+        gray = self._gray(arrays)
+
+        def step(name, fraction, fn, *args, **kwargs):
+            self.UpdateProgress(_STEPS_3D.get(name, 0.0))
+            return fn(*args, **kwargs)
+
+        labels = label_tetrahedra(volume, tetra_mesh(points, tetrahedra), gray, self.params,
+                                  spacing, timed=step)
+        return ({"material": labels.material.astype("int32")},
+                {"material_gray": labels.material_gray,
+                 "relabelled_for_manifold": float(labels.relabelled)})

@@ -1,19 +1,47 @@
-"""Stage 4 as a VTK filter: CVT sites -> their Delaunay triangle mesh."""
+"""Stage 4 as VTK filters: CVT sites -> their Delaunay triangles (a slice's sites) or
+tetrahedra (a volume's sites)."""
 import numpy as np
+from vtkmodules.util import numpy_support
+from vtkmodules.vtkCommonDataModel import VTK_TETRA, vtkUnstructuredGrid
 
+from ctseg.errors import InputError
+from ctseg.stages3d import tetrahedra_3d
 from ctseg.triangulation import delaunay_mesh
 
-from .base import CTSegAlgorithm
-from .convert import _cells, _points, attach_geometry, geometry_from_field_data
+from .base import CTSegAlgorithm, spec_names
+from .convert import (GEOMETRY_FIELD, _cells, _field_array, _points, attach_geometry,
+                      geometry_from_field_data)
+from .sites import add_box_points, box_points
+
+
+def recorded_geometry(data):
+    """(ImageGeometry, shape) recorded on CVTSitesFilter's output: shape (rows, cols) for
+    a slice's sites, (nz, ny, nx) for a volume's.
+
+    Raises
+    ------
+    InputError
+        No geometry recorded.
+    """
+    geom, _ = geometry_from_field_data(data)
+    values = numpy_support.vtk_to_numpy(data.GetFieldData().GetArray(GEOMETRY_FIELD))
+    return geom, tuple(int(v) for v in values[15:])
+
+
+def _site_points(sites):
+    if sites.GetPoints() is None or sites.GetNumberOfPoints() == 0:
+        raise InputError("sites: the polydata has no points")
+    return np.array(numpy_support.vtk_to_numpy(sites.GetPoints().GetData()), np.float64)
 
 
 class DelaunayMeshFilter(CTSegAlgorithm):
-    """Delaunay triangulation of the CVT sites (:func:`ctseg.delaunay_mesh`, SPEC 4).
+    """Delaunay triangulation of a slice's CVT sites (:func:`ctseg.delaunay_mesh`, SPEC 4).
 
     The triangulation is made in the image's index coordinates, as the method defines it
     (with anisotropic spacing a Delaunay mesh in world units would differ).
-    Input: CVTSitesFilter's output. Output: vtkPolyData of counter-clockwise triangles in
-    world coordinates, the image geometry carried on.
+    Input: CVTSitesFilter's output for one slice (a volume's sites go to
+    DelaunayTetraFilter). Output: vtkPolyData of counter-clockwise triangles in world
+    coordinates, the image geometry carried on.
     """
 
     def __init__(self):
@@ -21,11 +49,58 @@ class DelaunayMeshFilter(CTSegAlgorithm):
 
     def _request(self, request, in_info, out_info):
         sites = self._input(in_info)
-        geom, shape = geometry_from_field_data(sites)
-        pts = np.array([sites.GetPoint(k) for k in range(sites.GetNumberOfPoints())])
+        geom, shape = recorded_geometry(sites)
+        if len(shape) != 2:
+            raise InputError(f"sites: of a volume {shape}; DelaunayTetraFilter makes their "
+                             "tetrahedra (DelaunayMeshFilter triangulates a slice's sites)")
+        pts = _site_points(sites)
         mesh = delaunay_mesh(geom.to_index(pts)[:, :2])
         out = self._output_poly(out_info)
         out.SetPoints(_points(geom.to_world(np.column_stack([mesh.points, np.zeros(len(pts))]))))
         out.SetPolys(_cells(mesh.triangles.ravel(), 3))
         attach_geometry(out, geom, shape)
+        self.UpdateProgress(1.0)
+
+
+class DelaunayTetraFilter(CTSegAlgorithm):
+    """Delaunay tetrahedra of a volume's CVT sites, slivers perturbed away
+    (:func:`ctseg.stages3d.tetrahedra_3d`: :func:`ctseg.tetrahedra.perturb_slivers`,
+    SPEC 9.4), as the 3D mode makes them.
+
+    The tetrahedra are made in the volume's physical box coordinates (index x spacing), as
+    the 3D mode defines them. Input: CVTSitesFilter's output for a volume (a slice's sites
+    go to DelaunayMeshFilter). Output: vtkUnstructuredGrid of tetrahedra in world
+    coordinates, positively oriented in world space (two vertices swapped where the
+    image's direction flips), with the exact box coordinates of its points
+    (:data:`ctseg.filters.sites.BOX_POINTS`, for TriangleGrayFilter and
+    GraphCutSegmentFilter), field data ``slivers_left`` and the image geometry.
+    Parameters (``ctseg params``): the tetrahedra group (SliverMinDihedral,
+    SliverRounds) and Seed (of the sliver moves; CTSegmentFilter uses one Seed for the
+    sites and the slivers, so set CVTSitesFilter's and this one's alike to compare).
+    """
+
+    PARAMETERS = spec_names("tetrahedra", names=("seed",))
+
+    def __init__(self):
+        super().__init__(input_type="vtkPolyData", output_type="vtkUnstructuredGrid")
+
+    def _request(self, request, in_info, out_info):
+        sites = self._input(in_info)
+        geom, shape = recorded_geometry(sites)
+        if len(shape) != 3:
+            raise InputError(f"sites: of one slice {shape}; DelaunayMeshFilter triangulates "
+                             "them (DelaunayTetraFilter takes a volume's sites)")
+        spacing = np.asarray(geom.spacing, float)
+        box = box_points(sites, geom, shape, name="sites")
+        self.UpdateProgress(0.0)
+        mesh, slivers = tetrahedra_3d(box, shape, self.params, spacing)
+        tets = mesh.tetrahedra
+        if np.linalg.det(geom.direction) < 0:  # world space is mirrored: keep volumes positive
+            tets = tets[:, [0, 2, 1, 3]]
+        out = vtkUnstructuredGrid.GetData(out_info, 0)
+        out.SetPoints(_points(geom.to_world(mesh.points / spacing)))
+        out.SetCells(VTK_TETRA, _cells(tets.ravel(), 4))
+        add_box_points(out, mesh.points)
+        attach_geometry(out, geom, shape)
+        _field_array(out, "slivers_left", float(slivers))
         self.UpdateProgress(1.0)

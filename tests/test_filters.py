@@ -136,8 +136,8 @@ def test_stage_filters_report_what_is_missing():
     img = array_to_image(np.random.default_rng(0).random((10, 10)))
     with pytest.raises(CTSegError, match="DensityMapFilter"):
         CVTSitesFilter().apply(img)
-    with pytest.raises(CTSegError, match="one slice"):
-        DensityMapFilter().apply(array_to_image(np.zeros((3, 10, 10))))
+    with pytest.raises(CTSegError, match="at least 2 voxels"):
+        DensityMapFilter().apply(array_to_image(np.zeros((3, 1, 10))))
     sites = CVTSitesFilter()
     sites.SetNumberOfSites(20)
     tri = DelaunayMeshFilter().apply(sites.apply(DensityMapFilter().apply(img)))

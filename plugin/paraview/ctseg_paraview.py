@@ -124,8 +124,10 @@ MESH_AND_IMAGE = (("Mesh", 0, "vtkPolyData"), ("Image", 1, "vtkImageData"))
 
 CTSegment = proxy(
     CTSegmentFilter, "CTSegment", "CT Segment",
-    "CT slice or volume -> triangle mesh with one material per triangle (Yang et al. "
-    "2014); volumes slice by slice with one material numbering.",
+    "CT slice or volume -> mesh with one material per element (Yang et al. 2014). Mode "
+    "'slices': triangles, a volume slice by slice with one material numbering (output 1 "
+    "the boundaries as polylines); Mode '3d': tetrahedra, a vtkUnstructuredGrid (output 1 "
+    "the interface triangles between materials).",
     outputs=(("Mesh", 0), ("Boundaries", 1)))
 CTMetalStreaks = proxy(
     MetalStreakFilter, "CTMetalStreaks", "CT Metal Streaks",

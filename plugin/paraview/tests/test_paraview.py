@@ -1,6 +1,9 @@
-"""The ParaView plugin inside the real ParaView (Debian's 5.11), headless.
+"""The ParaView plugin inside the real ParaView (Debian's 5.11), headless: slices mode.
 
-    PYTHONPATH=<site-packages with ctseg> pvpython plugin/paraview/test_paraview.py [SCREENSHOT.png]
+    PYTHONPATH=<site-packages with ctseg> pvpython plugin/paraview/tests/test_paraview.py [SCREENSHOT.png]
+
+(The tests live in this subfolder, not beside the plugin: ParaView loads every .py file of a
+PV_PLUGIN_PATH folder as a plugin, and would run a test file as one.)
 
 ParaView prints and swallows exceptions raised inside RequestData and goes on with an empty
 output, so every check here is on the data fetched back from the pipeline. With a file
@@ -27,8 +30,8 @@ from ctseg.params import SPECS
 from ctseg.phantoms import make_volume
 from ctseg.raster import label_image
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-LoadPlugin(os.path.join(HERE, "ctseg_paraview.py"), remote=False, ns=globals())
+PLUGIN = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "ctseg_paraview.py")
+LoadPlugin(PLUGIN, remote=False, ns=globals())
 GEOM = ImageGeometry(origin=(2.0, -1.0, 5.0), spacing=(0.1, 0.1, 0.8))
 RESULTS = []
 
