@@ -35,7 +35,7 @@ def _group(*groups):
 def test_each_filter_declares_its_stage_parameters():
     assert set(CTSegmentFilter.PARAMETERS) == set(SPECS)
     assert set(DensityMapFilter.PARAMETERS) == _group("density")
-    assert set(CVTSitesFilter.PARAMETERS) == {"n_sites", "pixels_per_site", "init", "seed",
+    assert set(CVTSitesFilter.PARAMETERS) == {"n_sites", "pixels_per_site", "voxels_per_site", "init", "seed",
                                               "ward_block_px"} | _group("cvt")
     assert set(MetalStreakFilter.PARAMETERS) == _group("levels") | {
         "density_floor", "density_saturation", "streak_sigma_px", "streak_margin_px",
@@ -134,7 +134,8 @@ def test_stage_filters_take_exactly_what_their_functions_read():
     keywords = lambda fn: set(list(inspect.signature(fn).parameters)[1:])  # noqa: E731
     assert keywords(ctseg.density_map) == set(DensityMapFilter.PARAMETERS)
     cvt = (keywords(ctseg.initial_sites) | keywords(ctseg.lloyd_cvt)) - {"sites", "progress"}
-    assert cvt | {"pixels_per_site"} == set(CVTSitesFilter.PARAMETERS)  # n_sites' default
+    # n_sites defaults: pixels_per_site for a slice, voxels_per_site for a volume
+    assert cvt | {"pixels_per_site", "voxels_per_site"} == set(CVTSitesFilter.PARAMETERS)
 
 
 # ------------------------------------------------------------------------- ParaView
