@@ -100,7 +100,10 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     -----
     The material levels are the volume's (:func:`ctseg.levels.volume_levels`); with
     ``streak_correction`` every z slice is first corrected against them, as in slices
-    mode. Pieces of a material touching along an edge only are joined or separated by
+    mode. Where the flat voxels hold partial volume (their spread more than twice the
+    tetrahedra's), the labelling takes the levels of the tetrahedron grays instead
+    (:func:`ctseg.levels3d.checked_levels`; ``diagnostics["levels"]`` says which).
+    Pieces of a material touching along an edge only are joined or separated by
     relabelling the tetrahedra around that edge (:func:`ctseg.surfaces.repair_pinched_edges`),
     so every surface is a closed manifold; ``diagnostics["relabelled_for_manifold"]``
     counts them. With ``blur_correction`` the grays are corrected for the blur the first
@@ -169,7 +172,8 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "n_interface_triangles": int(len(faces)),
         "n_materials": int(len(mat_gray)),
         "material_gray": [float(v) for v in mat_gray],
-        "material_levels_255": [float(v) for v in levels],
+        "material_levels_255": [float(v) for v in labels.levels_255],
+        "levels": labels.levels_report,
         "material_noise_255": float(pixel_sigma),
         "gray_rescale": {"offset": float(scale[0]), "factor": float(scale[1])},
         "times_s": times,

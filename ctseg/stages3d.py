@@ -19,6 +19,7 @@ from .density import density_volume
 from .errors import InputError, MeshCheckError, ParameterError
 from .labelling import CUT_KEYS
 from .levels import volume_levels
+from .levels3d import checked_levels
 from .params import AUTO, DEFAULTS, resolve
 from .pipeline import DENSITY_KEYS
 from .recursive_cut import order_by_gray, segment_triangles
@@ -182,6 +183,7 @@ class TetraLabels:
     graphcut_calls : int, of the last labelling
     blur_px : float or None, the fitted blur (None without blur correction)
     relabelled : int, tetrahedra relabelled for manifold surfaces
+    levels_report : dict, how the levels were chosen (:func:`ctseg.levels3d.checked_levels`)
     """
 
     material: np.ndarray
@@ -192,6 +194,7 @@ class TetraLabels:
     graphcut_calls: int
     blur_px: object
     relabelled: int
+    levels_report: dict
 
 
 def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=None, timed=None):
@@ -211,8 +214,9 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
     params, spacing
         As :func:`segment_volume_3d`.
     levels : (scale, levels_255, sigma_255), optional
-        The gray map and material levels; default measured on ``image``
-        (:func:`ctseg.levels.volume_levels`).
+        The gray map and material levels of the flat voxels; default measured on
+        ``image`` (:func:`ctseg.levels.volume_levels`). They are checked against the
+        tetrahedra's grays first (:func:`ctseg.levels3d.checked_levels`).
     timed : callable, optional
         A stage runner (:func:`ctseg.pipeline.stage_runner`) recording 'graphcut',
         'blur_correction', 'graphcut_2' and 'manifold_repair'.
@@ -243,6 +247,7 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
 
     cut = {k: getattr(p, k) for k in CUT_KEYS}
     f255 = np.clip((gray - offset) * factor, 0.0, 255.0)
+    levels, levels_report = checked_levels(levels, pixel_sigma, f255, volume_vox, p)
     # interior: most of the element's voxels are flat (the un-sharpened density below
     # half its range, as the flat pixels that measure the levels)
     strength = density_volume(image, sp, density_sigma_px=p.flat_sigma_px,
@@ -275,4 +280,4 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
                        material_gray=np.asarray(mat_gray, float), levels_255=levels,
                        scale=(offset, factor), pixel_sigma=pixel_sigma,
                        graphcut_calls=int(seg.graphcut_calls), blur_px=blur_px,
-                       relabelled=int(relabelled))
+                       relabelled=int(relabelled), levels_report=levels_report)

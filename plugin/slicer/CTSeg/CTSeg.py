@@ -174,7 +174,6 @@ class CTSegTest(ScriptedLoadableModuleTest):
         logic = CTSegLogic(slicer.mrmlScene)
         node = logic.parameter_node()
         node.SetParameter("Mode", "3d")
-        node.SetParameter("NumberOfMaterials", "4")
         model, segmentation, result = logic.run(volume)
         self.assertEqual(model.GetMesh().GetNumberOfCells(), len(result.tetrahedra))
         seg = segmentation.GetSegmentation()
