@@ -103,6 +103,8 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     mode. Where the flat voxels hold partial volume (their spread more than twice the
     tetrahedra's), the labelling takes the levels of the tetrahedron grays instead
     (:func:`ctseg.levels3d.checked_levels`; ``diagnostics["levels"]`` says which).
+    Tetrahedra straddling a boundary whose voxels mostly vote for other materials are
+    relabelled (:func:`ctseg.mixed_tetra.relabel_mixed`; ``diagnostics["relabelled_mixed"]``).
     Pieces of a material touching along an edge only are joined or separated by
     relabelling the tetrahedra around that edge (:func:`ctseg.surfaces.repair_pinched_edges`),
     so every surface is a closed manifold; ``diagnostics["relabelled_for_manifold"]``
@@ -186,6 +188,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "graphcut_calls": labels.graphcut_calls,
         "blur_px": labels.blur_px,
         "relabelled_for_manifold": labels.relabelled,
+        "relabelled_mixed": labels.mixed_relabelled,
         "element_quality": quality,
         "slivers_left": int(slivers),
         "streak_weights": streak_weights,

@@ -20,6 +20,7 @@ from .errors import InputError, MeshCheckError, ParameterError
 from .labelling import CUT_KEYS
 from .levels import volume_levels
 from .levels3d import checked_levels
+from .mixed_tetra import relabel_mixed
 from .params import AUTO, DEFAULTS, resolve
 from .pipeline import DENSITY_KEYS
 from .recursive_cut import order_by_gray, segment_triangles
@@ -183,6 +184,8 @@ class TetraLabels:
     graphcut_calls : int, of the last labelling
     blur_px : float or None, the fitted blur (None without blur correction)
     relabelled : int, tetrahedra relabelled for manifold surfaces
+    mixed_relabelled : int, mixed tetrahedra relabelled by their voxels
+        (:func:`ctseg.mixed_tetra.relabel_mixed`)
     levels_report : dict, how the levels were chosen (:func:`ctseg.levels3d.checked_levels`)
     """
 
@@ -195,6 +198,7 @@ class TetraLabels:
     blur_px: object
     relabelled: int
     levels_report: dict
+    mixed_relabelled: int
 
 
 def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=None, timed=None):
@@ -272,6 +276,8 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
         seg = run("graphcut_2", 0.88, segment_triangles, np.clip(f_sharp, 0.0, 255.0),
                   volume_vox, mesh.adjacency, cent, levels=levels, **cut)
     material = np.searchsorted(levels, seg.mode_gray)[seg.material]
+    material, mixed = run("mixed_relabel", 0.89, relabel_mixed, (image - offset) * factor,
+                          mesh.points, mesh.tetrahedra, material, levels, sp)
     material, relabelled = run("manifold_repair", 0.9, repair_pinched_edges, mesh, material,
                                volume_vox)
     # materials numbered by level; those no tetrahedron holds are dropped from the count
@@ -280,4 +286,5 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
                        material_gray=np.asarray(mat_gray, float), levels_255=levels,
                        scale=(offset, factor), pixel_sigma=pixel_sigma,
                        graphcut_calls=int(seg.graphcut_calls), blur_px=blur_px,
-                       relabelled=int(relabelled), levels_report=levels_report)
+                       relabelled=int(relabelled), levels_report=levels_report,
+                       mixed_relabelled=int(mixed))

@@ -1,0 +1,85 @@
+"""Mixed tetrahedra in the 3D labelling: an element that straddles a boundary between two
+materials averages them, and that average can be the gray of a third material (a
+tetrahedron half aluminium, half air reads as polymer). Its voxels tell: each voxel votes
+for the material whose gray level is nearest its own, and a tetrahedron whose own
+material gets less than :data:`MIXED_OWN_SHARE` of its volume while one material gets at
+least half takes that material.
+
+Only tetrahedra whose voxels spread more than :data:`MIXED_NOISE_SPREAD` noise units are
+asked (the others hold one material and its noise), so the voxel overlaps are computed
+for a few of them.
+"""
+import numpy as np
+
+from .tetra_gray import tetra_gray, voxel_overlaps
+
+MIXED_OWN_SHARE = 0.3
+"""A tetrahedron whose own material gets less than this share of its voxels' votes is
+relabelled (when another gets at least half)."""
+
+MIXED_NOISE_SPREAD = 3.0
+"""Tetrahedra whose voxels spread more than this many voxel-noise units are asked."""
+
+
+def voxel_noise(volume):
+    """Robust noise scale of a volume: the median absolute deviation of differences of
+    neighbouring voxels along each axis, as :func:`ctseg.intensity.estimate_noise` in 2D."""
+    v = np.asarray(volume, float)
+    d = np.concatenate([np.diff(v, axis=a).ravel() for a in range(v.ndim)])
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
+
+
+def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(1.0, 1.0, 1.0)):
+    """Relabel the mixed tetrahedra by their voxels' votes (see the module's docstring).
+
+    Parameters
+    ----------
+    volume_255 : (nz, ny, nx) array_like
+        The volume on the 0-255 scale of the levels.
+    points : (n, 3) float ndarray
+        Physical coordinates of the box, (x, y, z) = (i, j, k) x spacing.
+    tetrahedra : (m, 4) int ndarray
+    material : (m,) int ndarray
+        Index into ``level_255`` of each tetrahedron's material.
+    level_255 : (K,) array_like
+        Each material's gray level.
+    spacing : (3,) floats
+
+    Returns
+    -------
+    material : (m,) int64 ndarray
+    changed : int
+        Tetrahedra relabelled.
+
+    Example
+    -------
+    >>> from ctseg.tetrahedra import delaunay_tetrahedra
+    >>> vol = np.zeros((4, 4, 4)); vol[:, :, 2:] = 100.0
+    >>> cube = delaunay_tetrahedra(np.array([[x, y, z] for x in (0, 3) for y in (0, 3)
+    ...                                      for z in (0, 3)], float), (3, 3, 3))
+    >>> mat = np.full(len(cube.tetrahedra), 1)  # all read as the middle level's
+    >>> new, changed = relabel_mixed(vol, cube.points, cube.tetrahedra, mat, [0, 50, 100])
+    >>> changed == len(mat), sorted(set(new.tolist()))
+    (True, [0, 2])
+    """
+    vol = np.asarray(volume_255, float)
+    material = np.asarray(material, np.int64).copy()
+    level = np.asarray(level_255, float)
+    if len(level) < 2 or len(material) == 0:
+        return material, 0
+    noise = voxel_noise(vol)
+    mean = tetra_gray(vol, points, tetrahedra, spacing)
+    spread = np.sqrt(np.maximum(tetra_gray(vol * vol, points, tetrahedra, spacing) - mean ** 2, 0.0))
+    asked = np.flatnonzero(spread > MIXED_NOISE_SPREAD * noise)
+    if not len(asked):
+        return material, 0
+    tet, voxel, overlap = voxel_overlaps(points, np.asarray(tetrahedra)[asked], vol.shape, spacing)
+    vote = np.argmin(np.abs(vol.ravel()[voxel][:, None] - level[None, :]), axis=1)
+    votes = np.zeros((len(asked), len(level)))
+    np.add.at(votes, (tet, vote), overlap)
+    share = votes / np.maximum(votes.sum(axis=1, keepdims=True), 1e-300)
+    own = share[np.arange(len(asked)), material[asked]]
+    winner = np.argmax(share, axis=1)
+    flip = (own < MIXED_OWN_SHARE) & (share[np.arange(len(asked)), winner] >= 0.5)
+    material[asked[flip]] = winner[flip]
+    return material, int(flip.sum())
