@@ -3,7 +3,10 @@ materials averages them, and that average can be the gray of a third material (a
 tetrahedron half aluminium, half air reads as polymer). Its voxels tell: each voxel votes
 for the material whose gray level is nearest its own, and a tetrahedron whose own
 material gets less than :data:`MIXED_OWN_SHARE` of its volume while one material gets at
-least half takes that material.
+least half takes that material, if that material is the lowest or the highest of those
+holding at least :data:`MIXED_MIN_SHARE` of the votes: the blur between two materials
+gives voxels of every gray between them, so a mixture is made of its extremes (the blur
+tail of steel next to air reads as aluminium, and must not make aluminium).
 
 Only tetrahedra whose voxels spread more than :data:`MIXED_NOISE_SPREAD` noise units are
 asked (the others hold one material and its noise), so the voxel overlaps are computed
@@ -17,6 +20,10 @@ MIXED_OWN_SHARE = 0.3
 """A tetrahedron whose own material gets less than this share of its voxels' votes is
 relabelled (when another gets at least half)."""
 
+MIXED_MIN_SHARE = 0.1
+"""Materials with less than this share of a tetrahedron's votes do not count among its
+constituents."""
+
 MIXED_NOISE_SPREAD = 3.0
 """Tetrahedra whose voxels spread more than this many voxel-noise units are asked."""
 
@@ -29,7 +36,8 @@ def voxel_noise(volume):
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
 
 
-def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(1.0, 1.0, 1.0)):
+def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(1.0, 1.0, 1.0),
+                  mean_255=None):
     """Relabel the mixed tetrahedra by their voxels' votes (see the module's docstring).
 
     Parameters
@@ -44,6 +52,9 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
     level_255 : (K,) array_like
         Each material's gray level.
     spacing : (3,) floats
+    mean_255 : (m,) array_like, optional
+        Each tetrahedron's mean of ``volume_255`` (:func:`ctseg.tetra_gray.tetra_gray`), if
+        known already.
 
     Returns
     -------
@@ -68,7 +79,8 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
     if len(level) < 2 or len(material) == 0:
         return material, 0
     noise = voxel_noise(vol)
-    mean = tetra_gray(vol, points, tetrahedra, spacing)
+    mean = (tetra_gray(vol, points, tetrahedra, spacing) if mean_255 is None
+            else np.asarray(mean_255, float))
     spread = np.sqrt(np.maximum(tetra_gray(vol * vol, points, tetrahedra, spacing) - mean ** 2, 0.0))
     asked = np.flatnonzero(spread > MIXED_NOISE_SPREAD * noise)
     if not len(asked):
@@ -80,6 +92,11 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
     share = votes / np.maximum(votes.sum(axis=1, keepdims=True), 1e-300)
     own = share[np.arange(len(asked)), material[asked]]
     winner = np.argmax(share, axis=1)
-    flip = (own < MIXED_OWN_SHARE) & (share[np.arange(len(asked)), winner] >= 0.5)
+    present = share >= MIXED_MIN_SHARE
+    idx = np.arange(len(level))
+    lowest = np.where(present, idx, len(level)).min(axis=1)
+    highest = np.where(present, idx, -1).max(axis=1)
+    flip = ((own < MIXED_OWN_SHARE) & (share[np.arange(len(asked)), winner] >= 0.5)
+            & ((winner == lowest) | (winner == highest)))
     material[asked[flip]] = winner[flip]
     return material, int(flip.sum())
