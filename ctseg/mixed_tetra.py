@@ -3,7 +3,7 @@ materials averages them, and that average can be the gray of a third material (a
 tetrahedron half aluminium, half air reads as polymer). Its voxels tell: each voxel votes
 for the material whose gray level is nearest its own, and a tetrahedron whose own
 material gets less than :data:`MIXED_OWN_SHARE` of its volume while one material gets at
-least half takes that material, if that material is the lowest or the highest of those
+least half takes that material, if a face neighbour has it and it is the lowest or the highest of those
 holding at least :data:`MIXED_MIN_SHARE` of the votes: the blur between two materials
 gives voxels of every gray between them, so a mixture is made of its extremes (the blur
 tail of steel next to air reads as aluminium, and must not make aluminium).
@@ -37,7 +37,7 @@ def voxel_noise(volume):
 
 
 def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(1.0, 1.0, 1.0),
-                  mean_255=None):
+                  mean_255=None, adjacency=None):
     """Relabel the mixed tetrahedra by their voxels' votes (see the module's docstring).
 
     Parameters
@@ -52,6 +52,9 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
     level_255 : (K,) array_like
         Each material's gray level.
     spacing : (3,) floats
+    adjacency : (a, 2) int array_like, optional
+        Tetrahedra sharing a face: a tetrahedron then takes only a material one of its
+        neighbours has (a flip never makes two materials touch that did not).
     mean_255 : (m,) array_like, optional
         Each tetrahedron's mean of ``volume_255`` (:func:`ctseg.tetra_gray.tetra_gray`), if
         known already.
@@ -98,5 +101,14 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
     highest = np.where(present, idx, -1).max(axis=1)
     flip = ((own < MIXED_OWN_SHARE) & (share[np.arange(len(asked)), winner] >= 0.5)
             & ((winner == lowest) | (winner == highest)))
+    if adjacency is not None:
+        adj = np.asarray(adjacency, np.int64).reshape(-1, 2)
+        where = np.full(len(material), -1)
+        where[asked] = np.arange(len(asked))
+        has = np.zeros((len(asked), len(level)), bool)
+        for a, b in ((adj[:, 0], adj[:, 1]), (adj[:, 1], adj[:, 0])):
+            hit = where[a] >= 0
+            has[where[a[hit]], material[b[hit]]] = True
+        flip &= has[np.arange(len(asked)), winner]
     material[asked[flip]] = winner[flip]
     return material, int(flip.sum())

@@ -278,7 +278,7 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
     material = np.searchsorted(levels, seg.mode_gray)[seg.material]
     material, mixed = run("mixed_relabel", 0.89, relabel_mixed, (image - offset) * factor,
                           mesh.points, mesh.tetrahedra, material, levels, sp,
-                          mean_255=(gray - offset) * factor)
+                          mean_255=(gray - offset) * factor, adjacency=mesh.adjacency)
     material, relabelled = run("manifold_repair", 0.9, repair_pinched_edges, mesh, material,
                                volume_vox)
     # materials numbered by level; those no tetrahedron holds are dropped from the count
