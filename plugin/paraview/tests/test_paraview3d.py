@@ -17,15 +17,14 @@ import os
 import sys
 import tempfile
 import time
-import traceback
 
 import numpy as np
 from paraview import servermanager
 from paraview.simple import (Clip, ColorBy, CreateView, ExtractSurface, FeatureEdges,
                              GetColorTransferFunction, GetScalarBar, LoadPlugin, Render,
-                             SaveScreenshot, Show, Text, Threshold, XMLImageDataReader)
+                             SaveScreenshot, Show, Text, Threshold)
 
-from ctseg.filters import array_to_image, polydata_to_arrays
+from ctseg.filters import polydata_to_arrays
 from ctseg.filters.convert3d import grid_to_arrays
 from ctseg.geometry import ImageGeometry
 from ctseg.meshcheck import check_closed_surface
@@ -34,6 +33,7 @@ from ctseg.phantoms3d import make_part_3d
 from ctseg.raster import tetra_label_volume
 from ctseg.surfaces import material_surface
 from ctseg.tetrahedra import TetraMesh, face_graph, tetra_faces, tetra_volumes
+from pvharness import check, fetch, finish, write_vti
 
 PLUGIN = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "ctseg_paraview.py")
 LoadPlugin(PLUGIN, remote=False, ns=globals())
@@ -44,39 +44,7 @@ MATERIALS = ("air", "polymer", "aluminium", "steel")
 # four levels come from the tetrahedra, ctseg/levels3d.py); the thin polymer bushing,
 # 4 noise sd above air, is the hard one
 MIN_DICE = (0.97, 0.45, 0.80, 0.87)
-RESULTS = []
 DONE = {}
-
-
-def check(name):
-    def run(fn):
-        try:
-            t0 = time.perf_counter()
-            fn()
-            RESULTS.append((name, None))
-            print(f"PASS {name} ({time.perf_counter() - t0:.1f} s)")
-        except Exception:
-            RESULTS.append((name, traceback.format_exc()))
-            print(f"FAIL {name}\n{traceback.format_exc()}")
-        sys.stdout.flush()
-        return fn
-    return run
-
-
-def write_vti(path, arr, geom=GEOM):
-    from vtkmodules.vtkIOXML import vtkXMLImageDataWriter
-
-    w = vtkXMLImageDataWriter()
-    w.SetFileName(path)
-    w.SetInputData(array_to_image(arr, geom))
-    w.Write()
-    return XMLImageDataReader(FileName=[path])
-
-
-def fetch(proxy, port=0):
-    data = servermanager.Fetch(proxy, idx=port)
-    assert data is not None and data.GetNumberOfCells() > 0, "empty output (error in RequestData?)"
-    return data
 
 
 def edge_uses(triangles):
@@ -88,8 +56,8 @@ def edge_uses(triangles):
 
 tmp = tempfile.mkdtemp()
 part = make_part_3d(64, 0, SPACING)  # size, seed
-reader = write_vti(os.path.join(tmp, "part.vti"), part.image)
-small = write_vti(os.path.join(tmp, "small.vti"), make_part_3d(24, seed=1, porosity=False).image)
+reader = write_vti(os.path.join(tmp, "part.vti"), part.image, GEOM)
+small = write_vti(os.path.join(tmp, "small.vti"), make_part_3d(24, seed=1, porosity=False).image, GEOM)
 
 
 @check("3d: Mode switches output 0 between vtkUnstructuredGrid (tetrahedra) and vtkPolyData")
@@ -257,9 +225,4 @@ def screenshot(path):
 if len(sys.argv) > 1:
     check(f"3d screenshot {sys.argv[1]}")(lambda: screenshot(sys.argv[1]))
 
-failed = sum(1 for _, err in RESULTS if err)
-print(f"{len(RESULTS) - failed} passed, {failed} failed")
-sys.stdout.flush()
-# skip ParaView's teardown: under Xvfb it ends in a GLXBadContext error that turns a
-# passing run's exit status into 1
-os._exit(1 if failed else 0)
+finish()
