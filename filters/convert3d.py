@@ -29,12 +29,20 @@ def world_map(result, geometry=None):
     return (lambda pts: geometry.to_world(np.asarray(pts, float).reshape(-1, 3) / spacing)), flips
 
 
+def tetrahedra_to_world(points, tetrahedra, spacing, geometry=None):
+    """World points and tetrahedra of box-coordinate tetrahedra (points = index x
+    ``spacing``), each positively oriented in world space (two vertices swapped where the
+    direction flips)."""
+    spacing = np.asarray(spacing, float)
+    geometry = geometry or ImageGeometry(spacing=spacing)
+    tets = np.asarray(tetrahedra, np.int64)
+    world = geometry.to_world(np.asarray(points, float).reshape(-1, 3) / spacing)
+    return world, (tets[:, [0, 2, 1, 3]] if np.linalg.det(geometry.direction) < 0 else tets)
+
+
 def world_tetrahedra(result, geometry=None):
-    """World points and tetrahedra of a TetraSegmentation, each tetrahedron positively
-    oriented in world space (two vertices swapped where the direction flips)."""
-    to_world, flips = world_map(result, geometry)
-    tets = np.asarray(result.tetrahedra, np.int64)
-    return to_world(result.points), (tets[:, [0, 2, 1, 3]] if flips else tets)
+    """World points and tetrahedra of a TetraSegmentation (:func:`tetrahedra_to_world`)."""
+    return tetrahedra_to_world(result.points, result.tetrahedra, result.spacing, geometry)
 
 
 def world_surfaces(result, geometry=None):

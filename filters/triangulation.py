@@ -9,6 +9,7 @@ from ctseg.stages3d import tetrahedra_3d
 from ctseg.triangulation import delaunay_mesh
 
 from .base import CTSegAlgorithm, spec_names
+from .convert3d import tetrahedra_to_world
 from .convert import (GEOMETRY_FIELD, _cells, _field_array, _points, attach_geometry,
                       geometry_from_field_data)
 from .sites import add_box_points, box_points
@@ -94,11 +95,9 @@ class DelaunayTetraFilter(CTSegAlgorithm):
         box = box_points(sites, geom, shape, name="sites")
         self.UpdateProgress(0.0)
         mesh, slivers = tetrahedra_3d(box, shape, self.params, spacing)
-        tets = mesh.tetrahedra
-        if np.linalg.det(geom.direction) < 0:  # world space is mirrored: keep volumes positive
-            tets = tets[:, [0, 2, 1, 3]]
+        world, tets = tetrahedra_to_world(mesh.points, mesh.tetrahedra, spacing, geom)
         out = vtkUnstructuredGrid.GetData(out_info, 0)
-        out.SetPoints(_points(geom.to_world(mesh.points / spacing)))
+        out.SetPoints(_points(world))
         out.SetCells(VTK_TETRA, _cells(tets.ravel(), 4))
         add_box_points(out, mesh.points)
         attach_geometry(out, geom, shape)
