@@ -19,8 +19,9 @@ AUTO_NUMBER = 0
 class Param:
     """What one parameter is: the spec entry behind every layer's version of it.
 
-    ``kind`` is 'int', 'float', 'bool' or 'choice'; ``low``/``high`` bound numbers
-    (``low_open``/``high_open`` exclude the bound); ``auto`` says whether :data:`AUTO` is
+    ``kind`` is 'int', 'float', 'bool', 'choice' or 'floats' (a strictly ascending list of
+    numbers, written as text ``'40, 115, 150'`` where only text fits); ``low``/``high``
+    bound numbers (``low_open``/``high_open`` exclude the bound); ``auto`` says whether :data:`AUTO` is
     allowed; ``vtk`` is the CamelCase name of the VTK/ParaView/Slicer property; ``cli`` the
     command-line option of the common parameters (the others go through ``--set``).
     """
@@ -46,6 +47,8 @@ class Param:
             text = "true or false"
         elif self.kind == "choice":
             text = "one of " + ", ".join(repr(c) for c in self.choices)
+        elif self.kind == "floats":
+            text = "strictly ascending numbers, comma-separated"
         else:
             lo = "-inf" if self.low is None else _number_text(self.low)
             hi = "inf" if self.high is None else _number_text(self.high)
@@ -70,6 +73,8 @@ class Param:
             if value in self.choices:
                 return value
             raise bad
+        if self.kind == "floats":
+            return self._check_floats(value, bad)
         if isinstance(value, str):
             try:
                 value = float(value)
@@ -90,6 +95,41 @@ class Param:
         if self.high is not None and (value > self.high or (self.high_open and value == self.high)):
             raise bad
         return value
+
+    def _check_floats(self, value, bad):
+        if isinstance(value, str):
+            parts = value.replace(",", " ").split()
+        elif isinstance(value, (list, tuple, np.ndarray)):
+            parts = list(np.ravel(np.asarray(value, dtype=object)))
+        elif isinstance(value, numbers.Real):  # one level: one material
+            parts = [value]
+        else:
+            raise bad
+        if any(isinstance(t, (bool, np.bool_)) for t in parts):
+            raise bad
+        try:
+            values = [float(t) for t in parts]
+        except (TypeError, ValueError):
+            raise bad from None
+        if not values or not all(np.isfinite(values)):
+            raise bad
+        if any(b <= a for a, b in zip(values, values[1:])):
+            raise ParameterError(f"{self.name}: {value!r} is not valid; the values must be "
+                                 f"strictly ascending (one per material, lowest first)")
+        return tuple(values)
+
+    def to_text(self, value):
+        """The value as text that :meth:`parse` reads back (CLI, parameter nodes, ParaView
+        string properties)."""
+        if value == AUTO:
+            return AUTO
+        if self.kind == "floats":
+            # exact: repr round-trips every float
+            return ", ".join(str(int(v)) if float(v).is_integer() and abs(v) < 1e15
+                             else repr(float(v)) for v in value)
+        if self.kind == "bool":
+            return "true" if value else "false"
+        return str(value)
 
     def to_number(self, value):
         """The value as a number (AUTO as :data:`AUTO_NUMBER`, a choice as its index)."""

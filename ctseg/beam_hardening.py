@@ -22,7 +22,7 @@ from ._validate import as_image, check_number
 from .errors import ParameterError
 from .intensity import rescale_gray
 from .levels import flat_pixels, pixel_material_levels
-from .params import DEFAULTS, check, resolve
+from .params import AUTO, DEFAULTS, check, resolve
 from .projection import filtered_backprojection, forward_project
 
 # The basis is computed on an image no larger than this (block-averaged metal fraction,
@@ -241,7 +241,8 @@ def correct_streaks(image, params=None, *, gray_scale=None, levels_255=None, **o
     """The metal streak correction as :func:`ctseg.segment_image` runs it.
 
     :func:`correct_metal_streaks` with the material levels of the image itself
-    (:func:`ctseg.levels.pixel_material_levels` of its flat pixels) or the given ones,
+    (:func:`ctseg.levels.pixel_material_levels` of its flat pixels) or the given ones
+    (the parameter ``gray_levels`` first, else ``levels_255``),
     fitted on the flat pixels.
 
     Parameters
@@ -268,6 +269,8 @@ def correct_streaks(image, params=None, *, gray_scale=None, levels_255=None, **o
     p = resolve(params, **overrides)
     img = as_image(image)
     flat = flat_pixels(img, p.flat_sigma_px, p.density_floor, p.density_saturation)
+    if p.gray_levels != AUTO:  # the user's, in the image's units
+        return _correct(img, np.asarray(p.gray_levels, float), flat, p)
     if levels_255 is not None and gray_scale is not None:
         levels255, (offset, factor) = np.asarray(levels_255, float), gray_scale
     else:
@@ -279,6 +282,10 @@ def correct_streaks(image, params=None, *, gray_scale=None, levels_255=None, **o
             merge_floor_255=p.merge_floor_255, merge_threshold_255=p.merge_threshold_255,
             level_min_fraction=p.level_min_fraction, n_materials=p.n_materials)[0]
     levels = levels255 / factor + offset if factor else np.array([offset])
+    return _correct(img, levels, flat, p)
+
+
+def _correct(img, levels, flat, p):
     return correct_metal_streaks(img, levels, flat=flat, streak_sigma_px=p.streak_sigma_px,
                                  streak_margin_px=p.streak_margin_px,
                                  streak_rounds=p.streak_rounds,

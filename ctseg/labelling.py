@@ -60,13 +60,14 @@ def label_mesh(image, mesh, gray, params=None, *, scale=None, levels_255=None, *
         The parameters (levels, graph cut, recursion, blur correction); ``overrides``
         change single ones by name.
     levels_255 : (K,) array_like, optional
-        Fixed material levels: material k is level k (numbers agree across slices).
+        Fixed material levels: material k is level k (numbers agree across slices); so
+        are the parameters' ``gray_levels`` when given.
 
     Returns
     -------
     MeshLabels
         Materials 0..K-1 by ascending mean gray of what they hold (or by level, given
-        ``levels_255``).
+        ``levels_255`` or ``gray_levels``).
 
     Raises
     ------
@@ -102,6 +103,10 @@ def label_mesh(image, mesh, gray, params=None, *, scale=None, levels_255=None, *
         d = mesh.points[mesh.shared_edges[:, 0]] - mesh.points[mesh.shared_edges[:, 1]]
         edge_len = np.hypot(d[:, 0], d[:, 1])
     pixel_sigma = 0.0
+    if levels_255 is None and p.gray_levels != AUTO:
+        # the user's levels: numbered by level as well, so material k is the k-th level
+        levels_255, pixel_sigma = material_levels(
+            img, scale, **{k: getattr(p, k) for k in LEVEL_KEYS})
     fixed = levels_255 is not None
     if fixed:
         levels = np.sort(np.asarray(levels_255, float).ravel())

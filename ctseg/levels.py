@@ -9,9 +9,10 @@ from .geometry import slice_axis, volume_slice
 from .intensity import gray_scale, rescale_gray
 from .levels_auto import (FLAT_TRUST_FRACTION, clipped_extremes, level_report, level_sample,
                           low_gradient_pixels, otsu_candidates, otsu_thresholds)
+from .levels_given import check_gray_levels, given_levels_255
 from .params import AUTO, DEFAULTS, check
 
-LEVEL_KEYS = ("flat_sigma_px", "density_floor", "density_saturation", "merge_k", "merge_rel",
+LEVEL_KEYS = ("gray_levels", "flat_sigma_px", "density_floor", "density_saturation", "merge_k", "merge_rel",
               "merge_floor_255", "merge_threshold_255", "level_min_fraction", "n_materials")
 """The parameters of :func:`material_levels`."""
 
@@ -224,13 +225,13 @@ def flat_pixels(image, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAU
     return (strength - density_floor) < 0.5
 
 
-def material_levels(images, scale, *, flat_sigma_px=DEFAULTS.flat_sigma_px,
-                    density_floor=DEFAULTS.density_floor,
+def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
+                    flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAULTS.density_floor,
                     density_saturation=DEFAULTS.density_saturation, merge_k=DEFAULTS.merge_k,
                     merge_rel=DEFAULTS.merge_rel, merge_floor_255=DEFAULTS.merge_floor_255,
                     merge_threshold_255=DEFAULTS.merge_threshold_255,
-                    level_min_fraction=DEFAULTS.level_min_fraction,
-                    n_materials=DEFAULTS.n_materials, report=None):
+                    level_min_fraction=DEFAULTS.level_min_fraction, n_materials=DEFAULTS.n_materials,
+                    report=None):
     """Material gray levels (0-255 scale) seen in one slice or in a stack of slices.
 
     The modes of the histogram of the pixels away from edges
@@ -259,17 +260,21 @@ def material_levels(images, scale, *, flat_sigma_px=DEFAULTS.flat_sigma_px,
       every k' <= k keeps adjacent class means at least that separation apart (sigma
       from the flat pixels), used if it is more levels than the flat pixels gave.
 
+    Given ``gray_levels`` (input units), those are the levels (:func:`given_levels_255`).
+
     Parameters
     ----------
     images : (rows, cols) or (n, rows, cols) array_like
     scale : (offset, factor)
         The map onto 0-255 (:func:`ctseg.intensity.gray_scale`).
+    gray_levels : sequence of float or 'auto'
+        The levels in the input's units, ascending; 'auto' finds them as above.
     flat_sigma_px, density_floor, density_saturation
         Define the flat pixels (:func:`flat_pixels`).
     merge_k, merge_rel, merge_floor_255, merge_threshold_255, level_min_fraction, n_materials
         As in :func:`pixel_material_levels`.
     report : dict, optional
-        Filled with the evidence: ``method`` ('flat_pixels', 'low_gradient',
+        Filled with the evidence: ``method`` ('given', 'flat_pixels', 'low_gradient',
         'otsu_all_pixels'), ``reason`` (why the flat pixels were not trusted),
         ``criterion``, ``flat_fraction``, ``flat_levels_255``, ``low_gradient_fraction``,
         ``k_candidates`` (multi-level Otsu of the pixels used, for k = 1..6, with the
@@ -297,6 +302,12 @@ def material_levels(images, scale, *, flat_sigma_px=DEFAULTS.flat_sigma_px,
                      for sl in stack])
     kw = dict(merge_k=merge_k, merge_rel=merge_rel, merge_floor_255=merge_floor_255,
               merge_threshold_255=merge_threshold_255, level_min_fraction=level_min_fraction)
+    if check("gray_levels", gray_levels) != AUTO:
+        levels = given_levels_255(gray_levels, scale)
+        sigma = pixel_material_levels(g255, flat, **kw)[1]
+        if report is not None:
+            report.update(method="given", levels_255=levels.tolist(), sigma_255=float(sigma))
+        return levels, sigma
     n_mat = check("n_materials", n_materials)
     clip_lo, clip_hi = clipped_extremes(stack)
     clipped = [m for m in (clip_lo, clip_hi) if m.any()]
@@ -351,8 +362,9 @@ def material_levels(images, scale, *, flat_sigma_px=DEFAULTS.flat_sigma_px,
                 else (lambda g: merge_threshold_255)
             k_cand = otsu_candidates(sm, sep)
     clip_levels = [float(np.mean(g255[m])) for m in clipped]
-    for c in clip_levels:  # a clipped end is a material of its own, at its gray
-        levels = np.sort(np.append(levels[np.abs(levels - c) >= base], c))
+    for c in clip_levels:  # a material of its own (with n_materials, the rest found without it)
+        near = np.abs(levels - c) < base if n_mat == AUTO else np.zeros(len(levels), bool)
+        levels = np.sort(np.append(levels[~near], c))
     if report is not None:
         report.update(level_report(method, reason, flat, flat_levels, low, k_cand, levels,
                                    sigma, clip_lo, clip_hi, clip_levels))
@@ -361,12 +373,6 @@ def material_levels(images, scale, *, flat_sigma_px=DEFAULTS.flat_sigma_px,
 
 LEVEL_SAMPLE_VOXELS = 1 << 25
 """At most this many voxels (evenly spaced whole slices) measure the gray map and levels."""
-
-
-def _sample_slices(n_slices, slice_voxels):
-    """Evenly spaced slice indices whose voxels stay within LEVEL_SAMPLE_VOXELS."""
-    n_keep = max(1, min(n_slices, LEVEL_SAMPLE_VOXELS // max(slice_voxels, 1)))
-    return np.unique(np.linspace(0, n_slices - 1, n_keep).round().astype(int))
 
 
 def volume_levels(volume, params, axis=0):
@@ -385,8 +391,10 @@ def volume_levels(volume, params, axis=0):
     """
     ax = slice_axis(axis)
     n_slices = volume.shape[ax]
-    sample = _sample_slices(n_slices, volume.size // n_slices)
+    n_keep = max(1, min(n_slices, LEVEL_SAMPLE_VOXELS // max(volume.size // n_slices, 1)))
+    sample = np.unique(np.linspace(0, n_slices - 1, n_keep).round().astype(int))
     stack = np.stack([as_image(volume_slice(volume, ax, k), name=f"slice {k}") for k in sample])
+    check_gray_levels(params.gray_levels, stack)
     scale = gray_scale(stack, params.rescale_low_pct, params.rescale_high_pct)
     levels, sigma = material_levels(stack, scale, **{k: getattr(params, k) for k in LEVEL_KEYS})
     return scale, levels, sigma, sample

@@ -71,7 +71,8 @@ def checked_levels(levels_255, flat_sigma_255, gray_255, volume, params=None):
     -------
     levels_255 : (K,) ndarray
     report : dict
-        ``method`` ('flat_voxels' or 'tetrahedra'), both spreads and both level sets.
+        ``method`` ('given', 'flat_voxels' or 'tetrahedra'), both spreads and both level
+        sets.
 
     Example
     -------
@@ -85,6 +86,9 @@ def checked_levels(levels_255, flat_sigma_255, gray_255, volume, params=None):
     levels_255 = np.asarray(levels_255, float)
     report = {"method": "flat_voxels", "flat_sigma_255": float(flat_sigma_255),
               "flat_levels_255": [float(v) for v in levels_255]}
+    if p.gray_levels != AUTO:
+        report["method"] = "given"
+        return levels_255, report
     if p.n_materials != AUTO or len(gray_255) == 0:
         return levels_255, report
     t_levels, t_sigma = tetra_levels(gray_255, volume, p)

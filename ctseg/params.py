@@ -110,6 +110,9 @@ class LevelParams(_Group):
     n_materials: int = _param(AUTO, "int", "exact number of materials; auto = found from the "
                               "data", low=1, high=64, auto=True, vtk="NumberOfMaterials",
                               cli="--materials")
+    gray_levels: tuple = _param(AUTO, "floats", "the materials' gray levels, one per "
+                                "material, lowest first (material k is the k-th); auto = "
+                                "found from the data", "input gray", auto=True, cli="--levels")
     rescale_low_pct: float = _param(0.5, "float", "percentile mapped to gray 0 of the 0-255 "
                                     "scale", "%", low=0.0, high=50.0, high_open=True)
     rescale_high_pct: float = _param(99.5, "float", "percentile mapped to gray 255", "%",
@@ -256,6 +259,15 @@ class SegmentParams:
     recursion: RecursionParams = field(default_factory=RecursionParams)
     corrections: CorrectionParams = field(default_factory=CorrectionParams)
     volume: VolumeParams = field(default_factory=VolumeParams)
+
+    def __post_init__(self):
+        lv = self.levels
+        if lv.gray_levels != AUTO and lv.n_materials != AUTO and \
+                len(lv.gray_levels) != lv.n_materials:
+            raise ParameterError(f"gray_levels: {len(lv.gray_levels)} levels given "
+                                 f"({SPECS['gray_levels'].to_text(lv.gray_levels)}) but n_materials="
+                                 f"{lv.n_materials}; give one of them, or as many levels as "
+                                 f"materials")
 
     def __getattr__(self, name):
         # only reached for names that are not groups: a parameter by its own name

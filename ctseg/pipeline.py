@@ -14,6 +14,7 @@ from .errors import ParameterError
 from .intensity import estimate_noise, rescale_gray
 from .labelling import label_mesh
 from .levels import LEVEL_KEYS, material_levels
+from .levels_given import check_gray_levels
 from .params import AUTO, DEFAULTS, resolve
 from .resources import check_memory, slice_bytes
 from .sites import initial_sites
@@ -173,6 +174,7 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
     """
     p = resolve(params, **overrides)
     img = as_image(image)
+    check_gray_levels(p.gray_levels, img)
     n_sites = p.n_sites
     if n_sites == AUTO:
         n_sites = default_n_sites(img.shape, p.pixels_per_site)

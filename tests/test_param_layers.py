@@ -79,6 +79,8 @@ def _other_value(spec):
         return not spec.default
     if spec.kind == "choice":
         return next(c for c in spec.choices if c != spec.default)
+    if spec.kind == "floats":
+        return (10.0, 20.5)
     for candidate in (spec.high, spec.low, (spec.low + spec.high) // 2):
         try:
             value = spec.check(candidate)
@@ -92,7 +94,7 @@ def _other_value(spec):
 def test_bad_values_name_parameter_value_and_range():
     f = CTSegmentFilter()
     for name, spec in SPECS.items():
-        bad = "nonsense" if spec.kind in ("choice", "bool") else spec.high * 2 + 1
+        bad = "nonsense" if spec.kind in ("choice", "bool", "floats") else spec.high * 2 + 1
         with pytest.raises(ParameterError) as err:
             getattr(f, f"Set{spec.vtk}")(bad)
         message = str(err.value)
@@ -220,6 +222,11 @@ def test_paraview_properties_are_the_spec(paraview_plugin):
             spec = SPECS[pname]
             vector, kw, domains = _property_of(vars(cls)[f"Set{spec.vtk}"])
             assert kw["name"] == spec.vtk and kw["command"] == f"Set{spec.vtk}"
+            if spec.kind == "floats":  # a text field: 'auto' or '40, 115, 150'
+                assert vector == "smproperty.stringvector", pname
+                assert kw["default_values"] == spec.to_text(spec.default), pname
+                assert "Documentation" in domains and "range" not in domains, pname
+                continue
             assert kw["default_values"] == [spec.to_number(spec.default)], pname
             want = "smproperty.doublevector" if spec.kind == "float" else "smproperty.intvector"
             assert vector == want, pname
@@ -305,6 +312,9 @@ def test_slicer_parameters_are_the_spec(slicer_logic):
             assert field["widget"] == "check"
         elif spec.kind == "choice":
             assert field["widget"] == "combo" and field["items"] == list(spec.choices)
+        elif spec.kind == "floats":
+            assert field["widget"] == "text"
+            assert spec.parse(slicer_logic.parameter_text(spec, (1.5, 20.0))) == (1.5, 20.0)
         else:
             assert field["widget"] == spec.kind
             low = min(spec.low, AUTO_NUMBER) if spec.auto else spec.low
@@ -345,7 +355,7 @@ def test_cli_set_and_named_options_follow_the_spec():
     assert _cli_params("--set", "lam=50").lam == 50.0
     for name, spec in SPECS.items():
         other = _other_value(spec)
-        text = str(other).lower() if spec.kind == "bool" else str(other)
+        text = str(other).lower() if spec.kind == "bool" else spec.to_text(other)
         assert getattr(_cli_params("--set", f"{name}={text}"), name) == other, name
         if spec.cli and spec.kind == "bool":
             assert getattr(_cli_params(spec.cli), name) is (not spec.default), name

@@ -67,6 +67,10 @@ def _property(base, name):
     setter.__doc__ = base_setter.__doc__
     default = [spec.to_number(spec.default)]
     func = smdomain.xml(f"<Documentation>{escape(documentation(spec))}</Documentation>")(setter)
+    if spec.kind == "floats":  # a list of numbers, or 'auto': a text field
+        return smproperty.stringvector(name=spec.vtk, command=f"Set{spec.vtk}",
+                                       number_of_elements=1,
+                                       default_values=spec.to_text(spec.default))(func)
     if spec.kind == "float":
         low, high = number_range(spec)
         func = smdomain.doublerange(min=low, max=high)(func)

@@ -57,7 +57,8 @@ def _():
     for name, spec in SPECS.items():
         prop = seg.SMProxy.GetProperty(spec.vtk)
         assert prop is not None, f"CTSegment has no property {spec.vtk} ({name})"
-        assert prop.GetElement(0) == spec.to_number(spec.default), (spec.vtk, prop.GetElement(0))
+        want = spec.to_text(spec.default) if spec.kind == "floats" else spec.to_number(spec.default)
+        assert prop.GetElement(0) == want, (spec.vtk, prop.GetElement(0))
     dens = CTDensityMap(Input=volume_reader)  # noqa: F821
     for spec in SPECS.values():  # the stage filter's property is named as the composite's
         assert (dens.SMProxy.GetProperty(spec.vtk) is not None) == (spec.group == "density"), spec.vtk
@@ -82,6 +83,23 @@ def _():
     assert min(dice[0], dice[2], dice[3]) >= 0.93 and dice[1] >= 0.75, dice
     bnd = fetch(seg, 1)
     assert bnd.GetNumberOfLines() > 0 and bnd.GetCellData().GetArray("material_a") is not None
+
+
+@check("volume: gray levels typed as text: material k is the k-th level")
+def _():
+    truth = phantom.truth.astype(np.int64)
+    levels = [float(np.median(phantom.image[truth == k])) for k in range(4)]
+    seg = CTSegment(Input=volume_reader, NumberOfSites=350, NumberOfJobs=1,  # noqa: F821
+                    GrayLevels=", ".join(f"{v:.1f}" for v in levels))
+    mesh = fetch(seg)
+    dice = dice_per_label(labels_per_slice(mesh, GEOM, phantom.image.shape), truth, 4)
+    print("    Dice per material with the true levels given:", np.round(dice, 3))
+    assert min(dice) >= 0.75 and min(dice[0], dice[2], dice[3]) >= 0.93, dice
+    bad = CTSegment(Input=volume_reader, NumberOfSites=350, NumberOfJobs=1,  # noqa: F821
+                    GrayLevels=f"{levels[1]}, {levels[0]}")  # not ascending
+    bad.UpdatePipeline()
+    data = servermanager.Fetch(bad)
+    assert data is None or data.GetNumberOfCells() == 0
 
 
 @check("volume: two worker processes give the same mesh")

@@ -84,6 +84,8 @@ class CTSegWidget(ScriptedLoadableModuleWidget):
         elif desc["widget"] == "combo":
             field = qt.QComboBox()
             field.addItems(desc["items"])
+        elif desc["widget"] == "text":
+            field = qt.QLineEdit()
         else:
             field = qt.QSpinBox() if desc["widget"] == "int" else qt.QDoubleSpinBox()
             if desc["widget"] == "float":
@@ -104,6 +106,8 @@ class CTSegWidget(ScriptedLoadableModuleWidget):
                 field.checked = bool(value)
             elif isinstance(field, qt.QComboBox):
                 field.setCurrentText(value)
+            elif isinstance(field, qt.QLineEdit):
+                field.text = spec.to_text(value)
             else:
                 field.setValue(spec.to_number(value))
 
@@ -113,6 +117,8 @@ class CTSegWidget(ScriptedLoadableModuleWidget):
             return parameter_text(spec, field.checked)
         if isinstance(field, qt.QComboBox):
             return field.currentText
+        if isinstance(field, qt.QLineEdit):
+            return field.text
         value = field.value
         return parameter_text(spec, spec.from_number(int(value) if spec.kind == "int" else value))
 

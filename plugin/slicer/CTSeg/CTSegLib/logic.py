@@ -37,11 +37,7 @@ MODULE_NAME = "CTSeg"
 def parameter_text(spec, value):
     """How a parameter value is written in the parameter node (read back by
     ``spec.parse``)."""
-    if value == AUTO:
-        return AUTO
-    if spec.kind == "bool":
-        return "true" if value else "false"
-    return str(value)
+    return spec.to_text(value)
 
 
 GROUP_LABELS = {"density": "Density map", "sites": "Initial sites", "cvt": "CVT (Lloyd)",
@@ -63,7 +59,8 @@ def field_description(spec):
     Returns
     -------
     dict
-        ``widget``: 'check' (bool), 'combo' (choice; ``items``), 'int' or 'float' (spin
+        ``widget``: 'check' (bool), 'combo' (choice; ``items``), 'text' (a list of
+        numbers, as :meth:`ctseg.params.Param.to_text` writes it), 'int' or 'float' (spin
         boxes with ``minimum``, ``maximum``, and for floats ``decimals`` and ``step``);
         ``special``: the text shown at the minimum when that minimum means 'auto'
         (:data:`ctseg.params.AUTO_NUMBER`), else None; ``tooltip``: meaning, unit, range.
@@ -72,6 +69,8 @@ def field_description(spec):
     out = {"widget": spec.kind, "tooltip": tooltip, "special": None}
     if spec.kind == "bool":
         out["widget"] = "check"
+    elif spec.kind == "floats":
+        out["widget"] = "text"
     elif spec.kind == "choice":
         out.update(widget="combo", items=list(spec.choices))
     else:
