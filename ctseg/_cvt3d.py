@@ -4,6 +4,11 @@ nearest sites, and the per-region sums.
 
 Voxel (k, j, i) is the point (i sx, j sy, k sz); flat index (k ny + j) nx + i. Private:
 :func:`ctseg.cvt3d.lloyd_cvt_3d` is the entry point.
+
+The per-voxel state (labels, second: int32; u, l2, l3: float32) is half the bytes of
+int64 / float64: the update of the bounds is a pass over it every iteration, bound by
+memory. The bounds are rounded outwards when stored (u up, l2 and l3 down: :func:`_up`,
+:func:`_down`), so they stay bounds and the labels stay exact.
 """
 import numpy as np
 from numba import njit
@@ -11,9 +16,32 @@ from numba import njit
 from ._cvt import _block_margin
 
 _REACH = 1
+_REACH2 = 3
+"""Cells: the ring of sites beyond _REACH and within this is bounded by its own largest
+drift (one fast site far away then lowers no bound)."""
 """Cells: the drift of the sites that started this near a voxel's cell lowers its bound
 on the other sites; a farther site counts as the block's margin less the largest drift.
 A small block keeps that bound local: fewer voxels are searched again."""
+
+
+_OUTWARD = 2.0 ** -22
+"""Relative widening of a bound stored as float32 (whose rounding is at most 2 ** -24)."""
+
+
+@njit(cache=True)
+def _up(x):
+    """x widened upwards, so that its float32 rounding is still >= x."""
+    if x == np.inf:
+        return x
+    return x + abs(x) * _OUTWARD + 1e-30
+
+
+@njit(cache=True)
+def _down(x):
+    """x widened downwards, so that its float32 rounding is still <= x."""
+    if x == np.inf:
+        return x
+    return x - abs(x) * _OUTWARD - 1e-30
 
 
 @njit(cache=True)
@@ -129,9 +157,9 @@ def _assign_3d(nz, ny, nx, sx, sy, sz, sites, labels, second, u, l2, l3):
                                                        gz, start, items)
                 labels[v] = i1
                 second[v] = i2
-                u[v] = d1
-                l2[v] = d2
-                l3[v] = d3
+                u[v] = _up(d1)
+                l2[v] = _down(d2)
+                l3[v] = _down(d3)
 
 
 @njit(cache=True)
@@ -198,22 +226,28 @@ def _reassign_3d(nz, ny, nx, sx, sy, sz, old_sites, sites, drift, labels, second
     Per voxel: its nearest site (labels) with u >= its distance, a second site (second)
     with l2 <= its distance, and l3 <= the distance of every other site. u grows by the own
     site's drift, l2 shrinks by the second's. A site that started within _REACH grid cells
-    of the voxel's cell came at most the largest drift among those sites closer; any other
-    site is at least the block's margin minus the largest drift overall away: l3 shrinks
-    by the smaller of the two. Where u >= min(l2, l3), the two sites' distances are
-    computed: if the nearer of them is nearer than l3 it is the nearest (the two may swap:
-    a voxel near the bisector of its two nearest sites needs no search); else the voxel is
-    searched again. Equality counts as a failed bound, so that an exact tie always goes to
-    the lower site index, as a search would give it. Returns the number of voxels
-    searched.
+    of the voxel's cell came at most the largest drift among those sites closer; one
+    within _REACH2 cells (but not _REACH) was at least max(l3, the inner block's margin)
+    away and came at most the largest drift of those; any other was at least max(l3, the
+    outer block's margin) away and came at most the largest drift overall: l3 becomes the
+    smallest of the three. Stored bounds are rounded outwards (float32). Where
+    u >= min(l2, l3), the two sites' distances are computed: if the nearer of them is
+    nearer than l3 it is the nearest (the two may swap: a voxel near the bisector of its
+    two nearest sites needs no search); else the voxel is searched again. Equality
+    counts as a failed bound, so that an exact tie always goes to the lower site index,
+    as a search would give it. Returns the number of voxels searched.
     """
     h, gx, gy, gz, start, items = _site_grid_3d(sites, (nx - 1) * sx, (ny - 1) * sy,
                                                 (nz - 1) * sz)
     b1 = _local_drift_3d(old_sites, drift, h, gx, gy, gz, _REACH)
+    b2 = _local_drift_3d(old_sites, drift, h, gx, gy, gz, _REACH2)
     far = drift.max()
     mx, cell_x = _reach_margin_3d(nx, sx, h, gx, _REACH)
     my, cell_y = _reach_margin_3d(ny, sy, h, gy, _REACH)
     mz, cell_z = _reach_margin_3d(nz, sz, h, gz, _REACH)
+    mx2 = _reach_margin_3d(nx, sx, h, gx, _REACH2)[0]
+    my2 = _reach_margin_3d(ny, sy, h, gy, _REACH2)[0]
+    mz2 = _reach_margin_3d(nz, sz, h, gz, _REACH2)[0]
     searched = 0
     for k in range(nz):
         z = k * sz
@@ -221,6 +255,7 @@ def _reassign_3d(nz, ny, nx, sx, sy, sz, old_sites, sites, drift, labels, second
             y = j * sy
             row_cell = (cell_z[k] * gy + cell_y[j]) * gx
             myz = min(my[j], mz[k])
+            myz2 = min(my2[j], mz2[k])
             for i in range(nx):
                 v = (k * ny + j) * nx + i
                 c = row_cell + cell_x[i]
@@ -228,7 +263,11 @@ def _reassign_3d(nz, ny, nx, sx, sy, sz, old_sites, sites, drift, labels, second
                 s2 = second[v]
                 ui = u[v] + drift[s1]
                 li2 = l2[v] - drift[s2]
-                li3 = min(l3[v] - b1[c], min(mx[i], myz) - far)
+                # the other sites: near ones by l3 and their drift, a ring farther by the
+                # inner block's margin and the ring's drift, the rest by the outer margin
+                old3 = l3[v]
+                li3 = min(old3 - b1[c], min(max(old3, min(mx[i], myz)) - b2[c],
+                                            max(old3, min(mx2[i], myz2)) - far))
                 if ui >= li2 or ui >= li3:  # equality: a tie, which the lower index wins
                     x = i * sx
                     ui = _dist(sites, s1, x, y, z)
@@ -242,9 +281,9 @@ def _reassign_3d(nz, ny, nx, sx, sy, sz, old_sites, sites, drift, labels, second
                         searched += 1
                     labels[v] = s1
                     second[v] = s2
-                u[v] = ui
-                l2[v] = li2
-                l3[v] = li3
+                u[v] = _up(ui)
+                l2[v] = _down(li2)
+                l3[v] = _down(li3)
     return searched
 
 

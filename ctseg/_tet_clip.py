@@ -283,41 +283,45 @@ def _tet_cells(corners, nz, ny, nx, cells, vols, pos_buf, nb_buf, side, newid, m
 
 
 @njit(cache=True)
-def _overlaps(P, nz, ny, nx, img, values, tet_vol, tet_w, vox_vol, vox_w, record):
-    """Visit every (tetrahedron, voxel) overlap of positive volume.
+def _work():
+    """The work buffers of :func:`_tet_cells` (the cell lists grow as needed)."""
+    return (np.empty((8, _MAXV, 3)), np.empty((8, _MAXV, 3), np.int64), np.empty(_MAXV, np.int64),
+            np.empty(_MAXV, np.int64), np.empty((_MAXV, 3), np.bool_), np.empty(64, np.int64),
+            np.empty(64))
+
+
+@njit(cache=True)
+def _span(corners):
+    """Upper bound of the cells a tetrahedron (4, 3) reaches: its cell range's box."""
+    span = 1
+    for d in range(3):
+        lo = min(corners[0, d], corners[1, d], corners[2, d], corners[3, d])
+        hi = max(corners[0, d], corners[1, d], corners[2, d], corners[3, d])
+        span *= int(np.ceil(hi - 0.5)) - int(np.floor(lo + 0.5)) + 2
+    return span
+
+
+@njit(cache=True)
+def _overlaps(P, nz, ny, nx, img, values, tet_vol, tet_w, vox_vol, vox_w):
+    """Visit every (tetrahedron, voxel) overlap of positive volume, without keeping them.
 
     ``P`` (m, 4, 3): the corners in index units, inside the box. With an image
     (``img.size > 0``, flat): add each overlap's volume to ``tet_vol`` and volume x gray
     to ``tet_w`` (per tetrahedron). With per-tetrahedron ``values``: add each overlap's
-    volume to ``vox_vol`` and volume x value to ``vox_w`` (per flat voxel). With
-    ``record``: also return all overlaps. Returns (count, tet, voxel, volume); the arrays
-    are empty unless ``record``; count = -1 - t if tetrahedron t outgrew the buffers.
+    volume to ``vox_vol`` and volume x value to ``vox_w`` (per flat voxel). Returns the
+    number of overlaps, or -1 - t if tetrahedron t outgrew the buffers.
     """
     m = P.shape[0]
-    pos_buf = np.empty((8, _MAXV, 3))
-    nb_buf = np.empty((8, _MAXV, 3), np.int64)
-    side = np.empty(_MAXV, np.int64)
-    newid = np.empty(_MAXV, np.int64)
-    mark = np.empty((_MAXV, 3), np.bool_)
-    cells = np.empty(64, np.int64)
-    vols = np.empty(64)
-    cap = 4 * m + 16 if record else 0
-    t_out = np.empty(cap, np.int64)
-    v_out = np.empty(cap, np.int64)
-    a_out = np.empty(cap)
+    pos_buf, nb_buf, side, newid, mark, cells, vols = _work()
     count = 0
     for t in range(m):
-        span = 1
-        for d in range(3):
-            lo = min(P[t, 0, d], P[t, 1, d], P[t, 2, d], P[t, 3, d])
-            hi = max(P[t, 0, d], P[t, 1, d], P[t, 2, d], P[t, 3, d])
-            span *= int(np.ceil(hi - 0.5)) - int(np.floor(lo + 0.5)) + 2
+        span = _span(P[t])
         if span > cells.shape[0]:
             cells = np.empty(2 * span, np.int64)
             vols = np.empty(2 * span)
         n = _tet_cells(P[t], nz, ny, nx, cells, vols, pos_buf, nb_buf, side, newid, mark)
         if n < 0:
-            return -1 - t, t_out[:0], v_out[:0], a_out[:0]
+            return -1 - t
         for q in range(n):
             c = cells[q]
             a = vols[q]
@@ -327,19 +331,68 @@ def _overlaps(P, nz, ny, nx, img, values, tet_vol, tet_w, vox_vol, vox_w, record
             if values.shape[0] > 0:
                 vox_vol[c] += a
                 vox_w[c] += a * values[t]
-        if record:
-            if count + n > t_out.shape[0]:
-                new_cap = 2 * (count + n)
-                t_new = np.empty(new_cap, np.int64)
-                v_new = np.empty(new_cap, np.int64)
-                a_new = np.empty(new_cap)
-                t_new[:count] = t_out[:count]
-                v_new[:count] = v_out[:count]
-                a_new[:count] = a_out[:count]
-                t_out, v_out, a_out = t_new, v_new, a_new
-            for q in range(n):
-                t_out[count + q] = t
-                v_out[count + q] = cells[q]
-                a_out[count + q] = vols[q]
         count += n
-    return count, t_out[:count], v_out[:count], a_out[:count]
+    return count
+
+
+@njit(cache=True)
+def _record(P, nz, ny, nx, t0, start, voxel, overlap):
+    """Write the overlaps of tetrahedra ``t0, t0 + 1, ...`` into compressed rows: those of
+    tetrahedron t at ``start[t]:start[t + 1]`` of ``voxel`` (flat voxel index) and
+    ``overlap`` (volume), ``start[t0]`` set on entry.
+
+    Returns the next tetrahedron to do: ``m`` when all are done, less when ``voxel`` is
+    full (call again from there with larger buffers), -1 - t if tetrahedron t outgrew the
+    polyhedron buffers.
+    """
+    m = P.shape[0]
+    pos_buf, nb_buf, side, newid, mark, cells, vols = _work()
+    count = start[t0]
+    for t in range(t0, m):
+        span = _span(P[t])
+        if span > cells.shape[0]:
+            cells = np.empty(2 * span, np.int64)
+            vols = np.empty(2 * span)
+        n = _tet_cells(P[t], nz, ny, nx, cells, vols, pos_buf, nb_buf, side, newid, mark)
+        if n < 0:
+            return -1 - t
+        if count + n > voxel.shape[0]:
+            return t
+        for q in range(n):
+            voxel[count + q] = cells[q]
+            overlap[count + q] = vols[q]
+        count += n
+        start[t + 1] = count
+    return m
+
+
+@njit(cache=True)
+def _row_sums(start, voxel, overlap, img):
+    """Per tetrahedron (compressed rows of :func:`_record`): the overlap volume and the
+    volume x gray of ``img`` (flat; the volume alone when empty), summed in the order
+    :func:`_overlaps` sums them."""
+    m = start.shape[0] - 1
+    vol = np.zeros(m)
+    w = np.zeros(m)
+    for t in range(m):
+        for q in range(start[t], start[t + 1]):
+            a = overlap[q]
+            vol[t] += a
+            if img.shape[0] > 0:
+                w[t] += a * img[voxel[q]]
+    return vol, w
+
+
+@njit(cache=True)
+def _column_sums(start, voxel, overlap, values, n):
+    """Per voxel (of ``n``): the overlap volume and the volume x value of the tetrahedra,
+    summed in the order :func:`_overlaps` sums them."""
+    vol = np.zeros(n)
+    w = np.zeros(n)
+    for t in range(start.shape[0] - 1):
+        for q in range(start[t], start[t + 1]):
+            c = voxel[q]
+            a = overlap[q]
+            vol[c] += a
+            w[c] += a * values[t]
+    return vol, w

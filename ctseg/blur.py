@@ -19,7 +19,7 @@ from ._validate import as_image, as_volume, check_number
 from .errors import ParameterError
 from .graph import connected_pieces
 from .params import DEFAULTS, check
-from .tetra_gray import tetra_gray, voxel_mean_of_tetrahedra
+from .tetra_gray import VoxelOverlaps, tetra_gray, voxel_mean_of_tetrahedra  # noqa: F401 (example)
 from .tetrahedra import tetra_faces, tetra_volumes
 from .triangle_gray import pixel_mean_of_triangles, triangle_gray
 from .triangulation import triangle_areas
@@ -271,10 +271,11 @@ def self_weight_3d(points, tetrahedra, sigma):
 
 def blur_corrected_gray_3d(gray, points, tetrahedra, level, volume, spacing=(1.0, 1.0, 1.0),
                            sigma=None, blur_min_self_weight=DEFAULTS.blur_min_self_weight,
-                           blur_max_px=DEFAULTS.blur_max_px):
+                           blur_max_px=DEFAULTS.blur_max_px, overlaps=None):
     """Tetrahedron grays with the blur a labelling predicts taken off: the rule of
     :func:`blur_corrected_gray` in 3D, with :func:`ctseg.tetra_gray.voxel_mean_of_tetrahedra`
-    for the level volume, a Gaussian in voxel units and :func:`self_weight_3d`.
+    (:meth:`ctseg.tetra_gray.VoxelOverlaps.voxel_mean`) for the level volume, a Gaussian
+    in voxel units and :func:`self_weight_3d`.
 
     Parameters
     ----------
@@ -287,6 +288,9 @@ def blur_corrected_gray_3d(gray, points, tetrahedra, level, volume, spacing=(1.0
     spacing : (3,) array_like
     sigma, blur_min_self_weight, blur_max_px
         As in :func:`blur_corrected_gray`.
+    overlaps : ctseg.tetra_gray.VoxelOverlaps, optional
+        The mesh's voxel overlaps, if computed already (the same results, without
+        clipping the tetrahedra twice more).
 
     Returns
     -------
@@ -315,11 +319,13 @@ def blur_corrected_gray_3d(gray, points, tetrahedra, level, volume, spacing=(1.0
     if gray.shape != (len(tetrahedra),):
         raise ParameterError(f"gray: expected one value per tetrahedron ({len(tetrahedra)}), "
                              f"got shape {gray.shape}")
-    lev, _ = voxel_mean_of_tetrahedra(np.asarray(level, float), points, tetrahedra, vol.shape, sp)
+    if overlaps is None:
+        overlaps = VoxelOverlaps(points, tetrahedra, vol.shape, sp)
+    lev, _ = overlaps.voxel_mean(np.asarray(level, float))
     if sigma is None:
         sigma = estimate_blur(vol, lev, blur_max_px=blur_max_px)
     sigma = check_number(sigma, "sigma", low=0.0)
     blurred = ndimage.gaussian_filter(lev, sigma, mode="nearest") if sigma > 0 else lev
-    predicted = tetra_gray(blurred, points, tetrahedra, sp)
+    predicted = overlaps.tetra_mean(blurred)
     w = np.maximum(self_weight_3d(np.asarray(points, float) / sp, tetrahedra, sigma), min_self_weight)
     return np.asarray(level, float) + (gray - predicted) / w, float(sigma)

@@ -246,8 +246,9 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
     sx, sy, sz = (float(v) for v in sp)
     w = np.ascontiguousarray(rho.ravel())
     feats = _features((nx, ny, nz), sp)
-    labels, second = np.empty(rho.size, np.int64), np.empty(rho.size, np.int64)
-    u, l2, l3 = np.empty(rho.size), np.empty(rho.size), np.empty(rho.size)
+    # the kernels' per-voxel state, in half-size types (see ctseg._cvt3d)
+    labels, second = np.empty(rho.size, np.int32), np.empty(rho.size, np.int32)
+    u, l2, l3 = (np.empty(rho.size, np.float32) for _ in range(3))
 
     def assign(s):
         _assign_3d(nz, ny, nx, sx, sy, sz, np.ascontiguousarray(s), labels, second, u, l2, l3)
@@ -303,7 +304,7 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
     if not keep.all():
         sites, cls, feat = np.ascontiguousarray(sites[keep]), cls[keep], feat[keep]
         assign(sites)
-    return CVT3DResult(sites=sites, labels=labels.reshape(rho.shape), energy=energy,
+    return CVT3DResult(sites=sites, labels=labels.astype(np.int64).reshape(rho.shape), energy=energy,
                        n_iter=it, converged=converged, empty_regions=empty_total,
                        site_class=cls, site_feature=feat)
 

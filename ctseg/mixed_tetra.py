@@ -10,11 +10,11 @@ tail of steel next to air reads as aluminium, and must not make aluminium).
 
 Only tetrahedra whose voxels spread more than :data:`MIXED_NOISE_SPREAD` noise units are
 asked (the others hold one material and its noise), so the voxel overlaps are computed
-for a few of them.
+for a few of them (from overlaps kept for all, :class:`ctseg.tetra_gray.VoxelOverlaps`).
 """
 import numpy as np
 
-from .tetra_gray import tetra_gray, voxel_overlaps
+from .tetra_gray import VoxelOverlaps
 
 MIXED_OWN_SHARE = 0.3
 """A tetrahedron whose own material gets less than this share of its voxels' votes is
@@ -37,7 +37,7 @@ def voxel_noise(volume):
 
 
 def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(1.0, 1.0, 1.0),
-                  mean_255=None, adjacency=None):
+                  mean_255=None, adjacency=None, overlaps=None):
     """Relabel the mixed tetrahedra by their voxels' votes (see the module's docstring).
 
     Parameters
@@ -58,6 +58,8 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
     mean_255 : (m,) array_like, optional
         Each tetrahedron's mean of ``volume_255`` (:func:`ctseg.tetra_gray.tetra_gray`), if
         known already.
+    overlaps : ctseg.tetra_gray.VoxelOverlaps, optional
+        The mesh's voxel overlaps, if computed already.
 
     Returns
     -------
@@ -82,13 +84,14 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
     if len(level) < 2 or len(material) == 0:
         return material, 0
     noise = voxel_noise(vol)
-    mean = (tetra_gray(vol, points, tetrahedra, spacing) if mean_255 is None
-            else np.asarray(mean_255, float))
-    spread = np.sqrt(np.maximum(tetra_gray(vol * vol, points, tetrahedra, spacing) - mean ** 2, 0.0))
+    if overlaps is None:
+        overlaps = VoxelOverlaps(points, tetrahedra, vol.shape, spacing)
+    mean = overlaps.tetra_mean(vol) if mean_255 is None else np.asarray(mean_255, float)
+    spread = np.sqrt(np.maximum(overlaps.tetra_mean(vol * vol) - mean ** 2, 0.0))
     asked = np.flatnonzero(spread > MIXED_NOISE_SPREAD * noise)
     if not len(asked):
         return material, 0
-    tet, voxel, overlap = voxel_overlaps(points, np.asarray(tetrahedra)[asked], vol.shape, spacing)
+    tet, voxel, overlap = overlaps.rows(asked)
     vote = np.argmin(np.abs(vol.ravel()[voxel][:, None] - level[None, :]), axis=1)
     votes = np.zeros((len(asked), len(level)))
     np.add.at(votes, (tet, vote), overlap)

@@ -16,7 +16,7 @@ from .pipeline import stage_runner
 from .stages3d import (cvt_sites_3d, default_n_sites_3d, density_3d,  # noqa: F401 (re-export)
                        label_tetrahedra, n_sites_3d, tetrahedra_3d)
 from .surfaces import material_interfaces, material_surface
-from .tetra_gray import tetra_gray
+from .tetra_gray import VoxelOverlaps
 from .tetrahedra import tetra_quality
 
 
@@ -154,9 +154,14 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     cvt = cvt_sites_3d(rho, p, sp, n_sites=n_sites, timed=timed,
                        progress=lambda it, n: report(0.2 + 0.5 * it / max(n, 1), "cvt"))
     mesh, slivers = timed("tetrahedra", 0.7, tetrahedra_3d, cvt.sites, image.shape, p, sp)
-    gray = timed("tetra_gray", 0.75, tetra_gray, image, mesh.points, mesh.tetrahedra, sp)
+
+    def gray_of():  # the overlaps, kept for every later mean over the mesh
+        overlaps = VoxelOverlaps(mesh.points, mesh.tetrahedra, image.shape, sp)
+        return overlaps, overlaps.tetra_mean(image)
+    overlaps, gray = timed("tetra_gray", 0.75, gray_of)
     labels = label_tetrahedra(image, mesh, gray, p, sp, levels=(scale, levels, pixel_sigma),
-                              timed=timed)
+                              timed=timed, overlaps=overlaps)
+    del overlaps
     material, mat_gray = labels.material, labels.material_gray
     faces, mat_a, mat_b = material_interfaces(mesh, material)
     report(0.95, "surfaces")

@@ -26,7 +26,7 @@ from .pipeline import DENSITY_KEYS
 from .recursive_cut import order_by_gray, segment_triangles
 from .sites import initial_sites_3d
 from .surfaces import repair_pinched_edges
-from .tetra_gray import tetra_gray
+from .tetra_gray import VoxelOverlaps
 from .tetrahedra import TetraMesh, face_graph, perturb_slivers, tetra_volumes
 
 
@@ -201,7 +201,8 @@ class TetraLabels:
     mixed_relabelled: int
 
 
-def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=None, timed=None):
+def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=None, timed=None,
+                     overlaps=None):
     """3D stages 6-7 (SPEC 9.6): one material per tetrahedron, from the gray levels, the
     recursive graph cut on the tetrahedron graph and the blur correction, with the rules
     of :func:`segment_volume_3d` (see its Notes); then pinched edges repaired
@@ -223,7 +224,11 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
         tetrahedra's grays first (:func:`ctseg.levels3d.checked_levels`).
     timed : callable, optional
         A stage runner (:func:`ctseg.pipeline.stage_runner`) recording 'graphcut',
-        'blur_correction', 'graphcut_2' and 'manifold_repair'.
+        'blur_correction', 'graphcut_2', 'mixed_relabel' and 'manifold_repair'.
+    overlaps : ctseg.tetra_gray.VoxelOverlaps, optional
+        The mesh's voxel overlaps on ``image``'s shape, if kept from the gray: every mean
+        over the mesh then reads them instead of clipping the tetrahedra again (default:
+        computed here, once).
 
     Returns
     -------
@@ -246,6 +251,8 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
         levels = volume_levels(image, p, 0)[:3]
     scale, levels, pixel_sigma = levels
     offset, factor = scale
+    if overlaps is None:
+        overlaps = VoxelOverlaps(mesh.points, mesh.tetrahedra, image.shape, sp)
     volume_vox = tetra_volumes(mesh.points, mesh.tetrahedra) / float(np.prod(sp))
     cent = mesh.points[mesh.tetrahedra].mean(axis=1)
 
@@ -258,7 +265,7 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
                               density_floor=p.density_floor,
                               density_saturation=p.density_saturation, density_ridge=0.0)
     flat = (strength - p.density_floor) < 0.5
-    interior = tetra_gray(flat.astype(np.float64), mesh.points, mesh.tetrahedra, sp) >= 0.5
+    interior = overlaps.tetra_mean(flat.astype(np.float64)) >= 0.5
     cut["interior"] = interior
     # the first pass without the thin-layer rules: a band of blurred-edge elements with an
     # intermediate gray must not predict a layer to the blur correction
@@ -271,14 +278,15 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
             return blur_corrected_gray_3d(f255, mesh.points, mesh.tetrahedra, level,
                                           (image - offset) * factor, sp,
                                           blur_min_self_weight=p.blur_min_self_weight,
-                                          blur_max_px=p.blur_max_px)
+                                          blur_max_px=p.blur_max_px, overlaps=overlaps)
         f_sharp, blur_px = run("blur_correction", 0.85, sharpen)
         seg = run("graphcut_2", 0.88, segment_triangles, np.clip(f_sharp, 0.0, 255.0),
                   volume_vox, mesh.adjacency, cent, levels=levels, **cut)
     material = np.searchsorted(levels, seg.mode_gray)[seg.material]
     material, mixed = run("mixed_relabel", 0.89, relabel_mixed, (image - offset) * factor,
                           mesh.points, mesh.tetrahedra, material, levels, sp,
-                          mean_255=(gray - offset) * factor, adjacency=mesh.adjacency)
+                          mean_255=(gray - offset) * factor, adjacency=mesh.adjacency,
+                          overlaps=overlaps)
     material, relabelled = run("manifold_repair", 0.9, repair_pinched_edges, mesh, material,
                                volume_vox)
     # materials numbered by level; those no tetrahedron holds are dropped from the count

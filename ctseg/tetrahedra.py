@@ -5,11 +5,16 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import Delaunay
 
+from ._retet import flat_off_face, local_delaunay
 from .errors import MeshCheckError
 
 # |volume| below this share of the mean tetrahedron volume counts as flat (zero volume
 # up to round-off: four sites on one face of the box, cocircular)
 FLAT_REL = 1e-10
+
+QHULL_OPTIONS = "Qbb Qc Qz Q12 Qt"
+"""Qhull's options for the Delaunay tetrahedra (Qz: a point at infinity, for the
+cospherical sites of near-regular sets; Qt: triangulated output)."""
 
 SLIVER_STEP = 0.1
 """Largest move of a sliver's vertex in :func:`perturb_slivers`, as a share of its
@@ -103,17 +108,6 @@ def face_graph(tetrahedra):
     return (np.column_stack([a // 4, b // 4]), faces[a], faces[single], single // 4)
 
 
-def _flat_off_face(pts, tets, vol, box):
-    """Flat tetrahedra, and which of them do not lie on one face of the box."""
-    flat = vol <= FLAT_REL * max(vol.mean(), 1e-300)
-    on_face = np.zeros(int(flat.sum()), bool)
-    p = pts[tets[flat]]
-    for ax in range(3):
-        for level in (0.0, box[ax]):
-            on_face |= np.all(np.abs(p[:, :, ax] - level) <= 1e-9 * max(box[ax], 1.0), axis=1)
-    return flat, ~on_face
-
-
 def _jitter(pts, box, size, seed):
     """Move every site by up to ``size`` along the axes on which it is free (a site on a
     box face stays on it, one on an edge on its line)."""
@@ -165,13 +159,13 @@ def delaunay_tetrahedra(sites, box):
     box = np.asarray(box, float)
     size = 1e-6 * float(np.linalg.norm(box))
     for attempt in range(4):
-        tri = Delaunay(pts, qhull_options="Qbb Qc Qz Q12 Qt")
+        tri = Delaunay(pts, qhull_options=QHULL_OPTIONS)
         tets = tri.simplices.astype(np.int64)
         vol = tetra_volumes(pts, tets)
         neg = vol < 0
         tets[neg] = tets[neg][:, [0, 2, 1, 3]]
         vol = np.abs(vol)
-        flat, inside = _flat_off_face(pts, tets, vol, box)
+        flat, inside = flat_off_face(pts, tets, vol, box, FLAT_REL)
         if not inside.any():
             break
         if attempt == 3:
@@ -187,6 +181,11 @@ def delaunay_tetrahedra(sites, box):
     if len(used) != len(pts):
         raise MeshCheckError(f"tetrahedra: {len(pts) - len(used)} site(s) are no vertex "
                              "(coincident sites)")
+    return _with_faces(pts, tets)
+
+
+def _with_faces(pts, tets):
+    """The TetraMesh of positively oriented tetrahedra, with its face graph."""
     adjacency, shared, bfaces, owner = face_graph(tets)
     return TetraMesh(points=pts, tetrahedra=tets, adjacency=adjacency, shared_faces=shared,
                      boundary_faces=bfaces, boundary_owner=owner)
@@ -218,6 +217,12 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
     (ties: the larger smallest angle) is kept. The same sites and seed give the same
     result.
 
+    Only the tetrahedra around the moved sites change: each round re-triangulates that
+    cavity alone (:func:`ctseg._retet.local_delaunay`: the tetrahedra whose circumsphere
+    holds a moved site, or that have one as a vertex), and all the sites only where that
+    patch fails its checks; the best sites are triangulated whole once at the end (the
+    same tetrahedra, in the order and orientation a whole triangulation gives them).
+
     Parameters
     ----------
     sites : (n, 3) array_like
@@ -235,18 +240,18 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
         Tetrahedra left below the angle.
     """
     box = np.asarray(box, float)
-    best_sites = np.asarray(sites, float)
-    best = delaunay_tetrahedra(best_sites, box)
-    angle = dihedral_angles(best.points, best.tetrahedra).min(axis=1)
+    first = delaunay_tetrahedra(np.asarray(sites, float), box)
+    best_pts, best_tets, best_mesh = first.points, first.tetrahedra, first
+    angle = dihedral_angles(best_pts, best_tets).min(axis=1)
     best_key = (int(np.sum(angle < min_dihedral_deg)), -float(angle.min()))
     rng = np.random.default_rng(seed)
     tol = 1e-9 * np.maximum(box, 1.0)
     for _ in range(rounds):
         if best_key[0] == 0:
             break
-        pts = best.points.copy()
-        bad = np.unique(best.tetrahedra[angle < min_dihedral_deg])
-        edges = np.concatenate([best.tetrahedra[:, [i, j]] for i, j in
+        pts = best_pts.copy()
+        bad = np.unique(best_tets[angle < min_dihedral_deg])
+        edges = np.concatenate([best_tets[:, [i, j]] for i, j in
                                 ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
         length = np.linalg.norm(pts[edges[:, 0]] - pts[edges[:, 1]], axis=1)
         shortest = np.full(len(pts), np.inf)
@@ -255,15 +260,29 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
         free = ~((np.abs(pts[bad]) <= tol) | (np.abs(pts[bad] - box) <= tol))
         step = rng.uniform(-SLIVER_STEP, SLIVER_STEP, (len(bad), 3)) * shortest[bad, None] * free
         pts[bad] = np.clip(pts[bad] + step, 0.0, box)
-        try:
-            trial = delaunay_tetrahedra(pts, box)
-        except MeshCheckError:
-            continue
-        a = dihedral_angles(trial.points, trial.tetrahedra).min(axis=1)
+        keep, added = local_delaunay(best_pts, pts, best_tets, bad, box, QHULL_OPTIONS,
+                                     FLAT_REL)
+        mesh = None
+        if added is not None:
+            tets = np.vstack([best_tets[keep], added])
+            a = np.concatenate([angle[keep], dihedral_angles(pts, added).min(axis=1)])
+        else:
+            try:
+                mesh = delaunay_tetrahedra(pts, box)
+            except MeshCheckError:
+                continue
+            pts, tets = mesh.points, mesh.tetrahedra
+            a = dihedral_angles(pts, tets).min(axis=1)
         key = (int(np.sum(a < min_dihedral_deg)), -float(a.min()))
         if key < best_key:
-            best, angle, best_key = trial, a, key
-    return best.points, best, best_key[0]
+            best_pts, best_tets, best_mesh, angle, best_key = pts, tets, mesh, a, key
+    if best_mesh is None:
+        # the best sites triangulated whole once more: the same tetrahedra, in Qhull's
+        # order (so the mesh is the one a full triangulation every round gave), and checked
+        best_mesh = delaunay_tetrahedra(best_pts, box)
+        angle = dihedral_angles(best_mesh.points, best_mesh.tetrahedra).min(axis=1)
+        best_key = (int(np.sum(angle < min_dihedral_deg)),)
+    return best_mesh.points, best_mesh, best_key[0]
 
 
 def tetra_quality(points, tetrahedra):

@@ -346,6 +346,12 @@ def test_border_sites_added_per_region_and_feature():
     assert np.sum(r.site_class == FREE) == 2 and len(r.sites) == 8 + 2 + 10 + 12
 
 
+def kernel_state(size):
+    """The kernels' per-voxel arrays, of the types lloyd_cvt_3d gives them."""
+    return ([np.empty(size, np.int32), np.empty(size, np.int32)]
+            + [np.empty(size, np.float32) for _ in range(3)])
+
+
 @pytest.mark.parametrize("ties", [False, True])
 def test_incremental_assignment_matches_a_fresh_one(ties):
     """The bounds kernel against a full search, over chains of moves: drifts, pauses, a few
@@ -359,7 +365,7 @@ def test_incremental_assignment_matches_a_fresh_one(ties):
         return np.clip(np.round(p / half) * half if ties else p, 0, hi)
 
     sites = np.unique(snap(rng.uniform(0, 1, (40, 3)) * hi), axis=0)
-    arrays = [np.empty(size, np.int64), np.empty(size, np.int64)] + [np.empty(size) for _ in range(3)]
+    arrays = kernel_state(size)
     _assign_3d(*shape, *sp, sites, *arrays)
     fresh = [np.empty_like(a) for a in arrays]
     for step in range(12):
@@ -380,8 +386,23 @@ def test_incremental_assignment_gives_an_exact_tie_to_the_lower_index():
     shape, sp = (2, 2, 4), (1.0, 1.0, 1.0)
     old = np.array([[3.0, 0, 0], [0, 0, 0], [3, 1, 1]])
     new = np.array([[2.0, 0, 0], [0, 0, 0], [3, 1, 1]])
-    arrays = [np.empty(16, np.int64), np.empty(16, np.int64)] + [np.empty(16) for _ in range(3)]
+    arrays = kernel_state(16)
     _assign_3d(*shape, *sp, old, *arrays)
     assert arrays[0][1] == 1
     _reassign_3d(*shape, *sp, old, new, np.linalg.norm(new - old, axis=1), *arrays)
     assert arrays[0][1] == 0 and np.array_equal(arrays[0], _nearest_many_3d(voxel_centres(shape, sp), new))
+
+
+def test_float32_bounds_are_rounded_outwards():
+    """The kernels store u, l2, l3 as float32, rounded outwards: still bounds of the
+    float64 distances they stand for (u above the nearest, l2 below the second)."""
+    shape, sp = (7, 9, 11), np.array([0.7, 1.3, 1.0])
+    sites = np.random.default_rng(3).uniform(0, 1, (30, 3)) * box_of(shape, sp)
+    arrays = kernel_state(int(np.prod(shape)))
+    _assign_3d(*shape, *sp, sites, *arrays)
+    labels, second, u, l2, l3 = arrays
+    c = voxel_centres(shape, sp)
+    d1 = np.linalg.norm(c - sites[labels], axis=1)
+    d2 = np.linalg.norm(c - sites[second], axis=1)
+    assert np.all(u.astype(np.float64) >= d1) and np.all(l2.astype(np.float64) <= d2)
+    assert np.all(l3 >= l2)

@@ -97,3 +97,75 @@ def test_sliver_perturbation_removes_slivers_and_keeps_the_box():
     again, _, _ = perturb_slivers(sites, box, 5.0, 12, seed=0)
     np.testing.assert_array_equal(again, pts)
     assert dihedral_angles(*[[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2, 3]]]).shape == (1, 6)
+
+
+def _tet_set(tets):
+    return {tuple(t) for t in np.sort(tets, axis=1).tolist()}
+
+
+@pytest.mark.parametrize("n_moved,on_faces", [(5, False), (60, False), (40, True)])
+def test_local_update_gives_the_delaunay_tetrahedra_of_the_moved_sites(n_moved, on_faces):
+    """The cavity around moved sites, re-triangulated alone, gives the tetrahedra a whole
+    triangulation gives (random sites: one Delaunay triangulation), with face sites moving
+    in their planes too."""
+    from ctseg._retet import local_delaunay
+    from ctseg.tetrahedra import FLAT_REL, QHULL_OPTIONS
+
+    box = np.array([10.0, 8.0, 6.0])
+    rng = np.random.default_rng(2)
+    face = rng.uniform(0, 1, (60, 3)) * box
+    # ten sites on each face: a face of its four corners alone is a tie (cocircular)
+    axis = np.arange(60) % 3
+    face[np.arange(60), axis] = np.where(np.arange(60) % 2, box[axis], 0.0)
+    sites = np.vstack([_corners(box), rng.uniform(0, 1, (400, 3)) * box, face])
+    old = delaunay_tetrahedra(sites, box)
+    pool = np.arange(408, 468) if on_faces else np.arange(8, 408)
+    moved = np.sort(rng.choice(pool, n_moved, replace=False))
+    new = sites.copy()
+    free = ~(np.isclose(sites[moved], 0.0) | np.isclose(sites[moved], box))
+    new[moved] = np.clip(sites[moved] + rng.uniform(-0.2, 0.2, (n_moved, 3)) * free, 0.0, box)
+    keep, added = local_delaunay(old.points, new, old.tetrahedra, moved, box, QHULL_OPTIONS,
+                                 FLAT_REL)
+    assert added is not None and 0 < (~keep).sum() < len(keep)
+    tets = np.vstack([old.tetrahedra[keep], added])
+    assert np.all(tetra_volumes(new, tets) > 0)
+    assert _tet_set(tets) == _tet_set(delaunay_tetrahedra(new, box).tetrahedra)
+
+
+def test_sliver_perturbation_gives_the_mesh_of_whole_triangulations():
+    """Local updates every round, one whole triangulation at the end: the same sites and
+    mesh as a whole triangulation every round (the rule before the local update)."""
+    from ctseg.tetrahedra import SLIVER_STEP, dihedral_angles, perturb_slivers
+
+    sites = _grid_sites(6, 0.08, seed=5)
+    box = np.array([6.0, 6.0, 6.0])
+    best = delaunay_tetrahedra(sites, box)
+    angle = dihedral_angles(best.points, best.tetrahedra).min(axis=1)
+    key = (int(np.sum(angle < 5)), -float(angle.min()))
+    rng = np.random.default_rng(0)
+    tol = 1e-9 * box
+    for _ in range(12):  # the rounds with a whole triangulation each
+        if key[0] == 0:
+            break
+        pts = best.points.copy()
+        bad = np.unique(best.tetrahedra[angle < 5])
+        edges = np.concatenate([best.tetrahedra[:, [i, j]] for i, j in
+                                ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
+        length = np.linalg.norm(pts[edges[:, 0]] - pts[edges[:, 1]], axis=1)
+        shortest = np.full(len(pts), np.inf)
+        np.minimum.at(shortest, edges[:, 0], length)
+        np.minimum.at(shortest, edges[:, 1], length)
+        free = ~((np.abs(pts[bad]) <= tol) | (np.abs(pts[bad] - box) <= tol))
+        step = rng.uniform(-SLIVER_STEP, SLIVER_STEP, (len(bad), 3)) * shortest[bad, None] * free
+        pts[bad] = np.clip(pts[bad] + step, 0.0, box)
+        try:
+            trial = delaunay_tetrahedra(pts, box)
+        except MeshCheckError:
+            continue
+        a = dihedral_angles(trial.points, trial.tetrahedra).min(axis=1)
+        if (int(np.sum(a < 5)), -float(a.min())) < key:
+            best, angle, key = trial, a, (int(np.sum(a < 5)), -float(a.min()))
+    pts, mesh, left = perturb_slivers(sites, box, 5.0, 12, seed=0)
+    np.testing.assert_array_equal(pts, best.points)
+    np.testing.assert_array_equal(mesh.tetrahedra, best.tetrahedra)
+    assert left == key[0]
