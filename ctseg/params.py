@@ -56,12 +56,21 @@ class SiteParams(_Group):
     """The initial sites (SPEC 2): how many and how they are placed."""
 
     group = "sites"
-    n_sites: int = _param(AUTO, "int", "CVT sites (mesh vertices) per slice; auto = one per "
-                          "pixels_per_site pixels", low=4, high=100_000_000, auto=True,
-                          vtk="NumberOfSites", cli="--sites")
-    pixels_per_site: float = _param(128.0, "float", "pixels per site when n_sites is auto "
-                                    "(at least 16 sites, at most one per pixel)", "px",
-                                    low=1.0, high=1e6)
+    n_sites: int = _param(AUTO, "int", "CVT sites (mesh vertices) per slice; auto = from "
+                          "the slice's size and boundary length (site_rule)", low=4,
+                          high=100_000_000, auto=True, vtk="NumberOfSites", cli="--sites")
+    pixels_per_site: float = _param(128.0, "float", "pixels per site when n_sites is auto: "
+                                    "the least a slice gets (at least 16 sites, at most one "
+                                    "per pixel)", "px", low=1.0, high=1e6)
+    site_rule: str = _param("boundary", "choice", "auto n_sites: one site per "
+                            "boundary_px_per_site px of boundary but at least one per "
+                            "pixels_per_site pixels, or one per pixels_per_site pixels "
+                            "only (the old rule)", choices=("boundary", "area"))
+    boundary_px_per_site: float = _param(3.0, "float", "pixels of boundary length per site "
+                                         "when n_sites is auto (site_rule boundary)", "px",
+                                         low=0.5, high=1e6)
+    min_pixels_per_site: float = _param(8.0, "float", "the boundary rule gives at most one "
+                                        "site per this many pixels", "px", low=1.0, high=1e6)
     init: str = _param("ward", "choice", "initial sites: Ward's clustering (the paper's), "
                        "uniform random, or random by density",
                        choices=("ward", "random", "density_random"), vtk="Initialization")
@@ -175,7 +184,7 @@ class RecursionParams(_Group):
 @dataclass(frozen=True)
 class CorrectionParams(_Group):
     """Corrections beyond the paper: metal streaks before, edge blur after the first
-    labelling."""
+    labelling, boundary vertices at the ISO-50 crossing at the end."""
 
     group = "corrections"
     streak_correction: bool = _param(True, "bool", "first remove the dark beam-hardening "
@@ -200,6 +209,13 @@ class CorrectionParams(_Group):
     blur_max_px: float = _param(3.0, "float", "largest point-spread sd the blur fit "
                                 "considers", "px", low=0.0, high=20.0, low_open=True,
                                 vtk="BlurMax")
+    subpixel_boundary: bool = _param(True, "bool", "move each vertex between two materials "
+                                     "to where the gray crosses the mean of their levels "
+                                     "(ISO-50), within the mesh (SPEC 10)",
+                                     cli="--no-subpixel-boundary")
+    subpixel_max_shift: float = _param(0.5, "float", "largest such move, as a share of the "
+                                       "vertex's shortest edge", low=0.0, high=1.0,
+                                       low_open=True, high_open=True)
 
 
 @dataclass(frozen=True)

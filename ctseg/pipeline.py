@@ -17,6 +17,9 @@ from .levels import LEVEL_KEYS, material_levels
 from .levels_given import check_gray_levels
 from .params import AUTO, DEFAULTS, resolve
 from .resources import check_memory, slice_bytes
+from .site_budget import site_budget
+from .subpixel import subpixel_mesh
+
 from .sites import initial_sites
 from .triangle_gray import triangle_gray
 from .triangulation import delaunay_mesh
@@ -46,8 +49,9 @@ def stage_runner(report, times, peaks_mib=None):
 
 
 def default_n_sites(shape, pixels_per_site=DEFAULTS.pixels_per_site):
-    """Default number of CVT sites: one per ``pixels_per_site`` pixels, at least 16 and at
-    most one per pixel.
+    """The size rule of the number of CVT sites: one per ``pixels_per_site`` pixels, at
+    least 16 and at most one per pixel (``site_rule='area'``; the least that
+    :func:`ctseg.site_budget.site_budget`, the default rule, gives a slice).
 
     Example
     -------
@@ -74,8 +78,10 @@ class SegmentedMesh:
     adjacency : (k, 2) int64 ndarray, adjacent triangle pairs
     diagnostics : dict
         ``times_s`` (per-stage wall time), ``cvt_energy`` (history), ``lloyd_iterations``,
-        ``graphcut_calls``, the parameters used, and ``levels``: how the material levels
-        were found, with the evidence (:func:`ctseg.levels.material_levels`'s report:
+        ``graphcut_calls``, the parameters used, ``sites``: how many sites and why
+        (:func:`ctseg.site_budget.site_budget`'s report: ``n_sites``, ``rule``, ``reason``,
+        ``boundary_px``; ``rule`` 'given' when ``n_sites`` was), and ``levels``: how the
+        material levels were found, with the evidence (:func:`ctseg.levels.material_levels`'s report:
         ``method``, ``reason``, ``k_candidates``, ``criterion``, ``clipped`` and the
         clipped fraction; ``{'method': 'given'}`` with ``levels_255``).
     density, cvt_labels : ndarray
@@ -176,7 +182,7 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
     img = as_image(image)
     check_gray_levels(p.gray_levels, img)
     n_sites = p.n_sites
-    if n_sites == AUTO:
+    if n_sites == AUTO:  # the size rule's count; the boundary rule may raise it below
         n_sites = default_n_sites(img.shape, p.pixels_per_site)
     if n_sites > img.size:
         raise ParameterError(
@@ -196,6 +202,13 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
     g255, scale = timed("rescale", 0.01, rescale_gray, img, p.rescale_low_pct,
                         p.rescale_high_pct, scale=gray_scale)
     noise = estimate_noise(g255)
+    if p.n_sites == AUTO:
+        n_sites, site_report = timed("site_budget", 0.01, site_budget, img, p.pixels_per_site,
+                                     p.boundary_px_per_site, p.min_pixels_per_site,
+                                     p.site_rule, p.density_sigma_px)
+    else:
+        site_report = {"n_sites": int(n_sites), "rule": "given", "reason": "n_sites given",
+                       "boundary_px": None}
     rho = timed("density", 0.01, density_map, img, **{k: getattr(p, k) for k in DENSITY_KEYS})
     sites0 = timed("initial_sites", 0.03, initial_sites, rho, n_sites, init=p.init,
                    seed=p.seed, ward_block_px=p.ward_block_px)
@@ -211,6 +224,13 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
     if labels.blur_px is not None:
         times["blur_correction"] = blur_s
     material, mat_gray = labels.material, labels.material_gray
+    points, n_moved = mesh.points, 0
+    if p.subpixel_boundary:  # the labels stay; the mesh's vertices move
+        fixed = levels_255 is not None or p.gray_levels != AUTO  # numbered by the levels
+        moved = timed("subpixel_boundary", 0.98, subpixel_mesh, img, mesh.points,
+                      mesh.triangles, gray, material, p.subpixel_max_shift, renumber=not fixed)
+        points, gray, material, n_moved = moved.points, moved.gray, moved.material, moved.n_moved
+        mat_gray = mat_gray if fixed else moved.material_gray
     bedges, bsides = timed("boundary", 0.99, material_boundary, mesh.shared_edges,
                            mesh.adjacency, material)
     report(1.0, "done")
@@ -223,6 +243,7 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
     diagnostics = {
         "image_shape": list(img.shape),
         "n_sites": int(n_sites),
+        "sites": site_report,
         "n_triangles": int(len(mesh.triangles)),
         "n_materials": int(len(mat_gray)),
         "init": p.init,
@@ -246,8 +267,9 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
         "material_gray": [float(v) for v in mat_gray],
         "streak_correction": streaks.summary() if streaks else None,
         "blur_px": labels.blur_px,
+        "subpixel_moved": int(n_moved),
     }
-    return SegmentedMesh(points=mesh.points, triangles=mesh.triangles, material=material,
+    return SegmentedMesh(points=points, triangles=mesh.triangles, material=material,
                          gray=gray, boundary_edges=bedges, boundary_sides=bsides,
                          material_gray=mat_gray, adjacency=mesh.adjacency, shape=img.shape,
                          diagnostics=diagnostics, density=rho, cvt_labels=cvt.labels,

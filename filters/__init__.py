@@ -18,6 +18,7 @@ from .sites import CVTSitesFilter
 from .triangulation import DelaunayMeshFilter, DelaunayTetraFilter
 from .triangle_gray import TriangleGrayFilter
 from .graphcut import GraphCutSegmentFilter
+from .subpixel import SubpixelBoundaryFilter
 from .boundary import MaterialBoundaryFilter
 from .segment import CTSegmentFilter, segment_array
 
@@ -31,5 +32,6 @@ __all__ = ["ImageGeometry", "image_to_array", "array_to_image", "mesh_to_polydat
            "TETRA_FORMATS", "CTSegAlgorithm",
            "MetalStreakFilter", "DensityMapFilter", "CVTSitesFilter", "DelaunayMeshFilter",
            "DelaunayTetraFilter",
-           "TriangleGrayFilter", "GraphCutSegmentFilter", "MaterialBoundaryFilter",
+           "TriangleGrayFilter", "GraphCutSegmentFilter", "SubpixelBoundaryFilter",
+           "MaterialBoundaryFilter",
            "CTSegmentFilter", "segment_array"]

@@ -8,7 +8,7 @@ from ctseg.tetra_gray import tetra_gray
 from ctseg.triangle_gray import triangle_gray
 
 from .base import CTSegAlgorithm
-from .convert import _add_cell_array, _field_array, mesh_index_coordinates, polydata_to_arrays
+from .convert import _add_cell_array, _field_array, _points, mesh_index_coordinates, polydata_to_arrays
 from .convert3d import grid_to_arrays
 from .density import image_input
 from .sites import box_points
@@ -78,9 +78,12 @@ class MeshAndImageFilter(CTSegAlgorithm):
                                          arrays)
         else:
             xyz, tri, arrays = polydata_to_arrays(mesh_in)
-            cells, fields = self._slice(arr, geom, xyz, tri, arrays)
+            cells, fields, *moved = self._slice(arr, geom, xyz, tri, arrays)
         out = vtkDataObject.GetData(out_info, 0)
         out.ShallowCopy(mesh_in)
+        if not grid and moved:  # new (x, y) index points of the slice
+            ijk = np.column_stack([moved[0], np.zeros(len(moved[0]))])
+            out.SetPoints(_points(geom.to_world(ijk)))
         for name, values in cells.items():
             _add_cell_array(out, values, name)
         for name, values in fields.items():
@@ -90,7 +93,8 @@ class MeshAndImageFilter(CTSegAlgorithm):
         self.UpdateProgress(1.0)
 
     def _slice(self, image, geometry, xyz, triangles, arrays):
-        """({cell array: values}, {field array: values}) of triangles over a slice."""
+        """({cell array: values}, {field array: values}) of triangles over a slice, and
+        optionally the moved points in (x, y) index coordinates."""
         raise NotImplementedError
 
     def _volume(self, volume, spacing, points, tetrahedra, arrays):

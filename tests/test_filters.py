@@ -8,7 +8,7 @@ import ctseg
 from ctseg.errors import CTSegError
 from ctseg.filters import (CTSegmentFilter, CVTSitesFilter, DelaunayMeshFilter,
                            DensityMapFilter, GraphCutSegmentFilter, MaterialBoundaryFilter,
-                           MetalStreakFilter, TriangleGrayFilter, array_to_image,
+                           MetalStreakFilter, SubpixelBoundaryFilter, TriangleGrayFilter, array_to_image,
                            polydata_to_arrays)
 from ctseg.geometry import AXES, ImageGeometry
 from ctseg.metrics import dice_per_label
@@ -98,11 +98,14 @@ def test_stage_filters_chain_equals_segment_image(tmp_path):
     cut = GraphCutSegmentFilter()
     cut.SetInputConnection(0, gray.GetOutputPort())
     cut.SetInputConnection(1, streaks.GetOutputPort())
+    sub = SubpixelBoundaryFilter()
+    sub.SetInputConnection(0, cut.GetOutputPort())
+    sub.SetInputConnection(1, streaks.GetOutputPort())
     bnd = MaterialBoundaryFilter()
-    bnd.SetInputConnection(cut.GetOutputPort())
-    out = _write_and_reread(tmp_path, cut.GetOutputPort())
+    bnd.SetInputConnection(sub.GetOutputPort())
+    out = _write_and_reread(tmp_path, sub.GetOutputPort())
     bnd.Update()
-    for f in (streaks, dens, sites, mesh, gray, cut, bnd):
+    for f in (streaks, dens, sites, mesh, gray, cut, sub, bnd):
         assert f.last_error is None, (type(f).__name__, f.last_error)
 
     ref = ctseg.segment_image(img, n_sites=150)

@@ -16,15 +16,17 @@ from ctseg.errors import ParameterError
 from ctseg.params import AUTO, AUTO_NUMBER, DEFAULTS, SPECS, SegmentParams
 from ctseg.filters import (CTSegmentFilter, CVTSitesFilter, DelaunayMeshFilter,
                            DensityMapFilter, GraphCutSegmentFilter, MaterialBoundaryFilter,
-                           MetalStreakFilter, TriangleGrayFilter)
+                           MetalStreakFilter, SubpixelBoundaryFilter, TriangleGrayFilter)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STAGE_FILTERS = (MetalStreakFilter, DensityMapFilter, CVTSitesFilter, DelaunayMeshFilter,
-                 TriangleGrayFilter, GraphCutSegmentFilter, MaterialBoundaryFilter)
+                 TriangleGrayFilter, GraphCutSegmentFilter, SubpixelBoundaryFilter,
+                 MaterialBoundaryFilter)
 PROXIES = {"CTSegment": CTSegmentFilter, "CTMetalStreaks": MetalStreakFilter,
            "CTDensityMap": DensityMapFilter, "CTCVTSites": CVTSitesFilter,
            "CTDelaunayMesh": DelaunayMeshFilter, "CTTriangleGray": TriangleGrayFilter,
-           "CTGraphCut": GraphCutSegmentFilter, "CTMaterialBoundary": MaterialBoundaryFilter}
+           "CTGraphCut": GraphCutSegmentFilter, "CTSubpixelBoundary": SubpixelBoundaryFilter,
+           "CTMaterialBoundary": MaterialBoundaryFilter}
 
 
 def _group(*groups):
@@ -81,7 +83,7 @@ def _other_value(spec):
         return next(c for c in spec.choices if c != spec.default)
     if spec.kind == "floats":
         return (10.0, 20.5)
-    for candidate in (spec.high, spec.low, (spec.low + spec.high) // 2):
+    for candidate in (spec.high, spec.low, (spec.low + spec.high) // 2, 0.75 * spec.low + 0.25 * spec.high):
         try:
             value = spec.check(candidate)
         except ParameterError:
@@ -208,7 +210,7 @@ def test_paraview_proxies_names_menus_ports(paraview_plugin):
         assert proxy_kw["name"] == name and proxy_kw["label"].startswith("CT ")
         assert ((paraview_plugin.MENU,), {}) in _calls(cls, "smhint.xml")
         ports = [kw["name"] for _, kw in _calls(cls, "smproperty.input")]
-        assert ports == (["Mesh", "Image"] if name in ("CTTriangleGray", "CTGraphCut") else ["Input"])
+        assert ports == (["Mesh", "Image"] if name in ("CTTriangleGray", "CTGraphCut", "CTSubpixelBoundary") else ["Input"])
     outputs = [a[0] for a, _ in _calls(paraview_plugin.CTSegment, "smproperty.xml") if "OutputPort" in a[0]]
     assert len(outputs) == 2
 

@@ -18,7 +18,7 @@ from paraview.util.vtkAlgorithm import smdomain, smhint, smproperty, smproxy
 from ctseg.params import AUTO_NUMBER, SPECS
 from ctseg.filters import (CTSegmentFilter, CVTSitesFilter, DelaunayMeshFilter,
                            DensityMapFilter, GraphCutSegmentFilter, MaterialBoundaryFilter,
-                           MetalStreakFilter, TriangleGrayFilter)
+                           MetalStreakFilter, SubpixelBoundaryFilter, TriangleGrayFilter)
 
 MENU = '<ShowInMenu category="ctseg"/>'
 GROUP_LABELS = {"density": "Density map", "sites": "Initial sites", "cvt": "CVT (Lloyd)",
@@ -154,6 +154,10 @@ CTTriangleGray = proxy(
 CTGraphCut = proxy(
     GraphCutSegmentFilter, "CTGraphCut", "CT Graph Cut",
     "Stages 6-7: recursive graph cut of the triangles into materials.",
+    inputs=MESH_AND_IMAGE)
+CTSubpixelBoundary = proxy(
+    SubpixelBoundaryFilter, "CTSubpixelBoundary", "CT Subpixel Boundary",
+    "The labelled triangles' boundary vertices moved to the ISO-50 crossing of the gray.",
     inputs=MESH_AND_IMAGE)
 CTMaterialBoundary = proxy(
     MaterialBoundaryFilter, "CTMaterialBoundary", "CT Material Boundary",

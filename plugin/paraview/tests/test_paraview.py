@@ -129,9 +129,11 @@ def _():
     tri = CTDelaunayMesh(Input=sites)  # noqa: F821
     gray = CTTriangleGray(Mesh=tri, Image=fixed)  # noqa: F821
     cut = CTGraphCut(Mesh=gray, Image=fixed)  # noqa: F821
-    bnd = CTMaterialBoundary(Input=cut)  # noqa: F821
-    a, b = polydata_to_arrays(fetch(whole)), polydata_to_arrays(fetch(cut))
+    sub = CTSubpixelBoundary(Mesh=cut, Image=fixed)  # noqa: F821
+    bnd = CTMaterialBoundary(Input=sub)  # noqa: F821
+    a, b = polydata_to_arrays(fetch(whole)), polydata_to_arrays(fetch(sub))
     assert np.array_equal(a[1], b[1]), "stage chain made other triangles"
+    assert np.allclose(a[0], b[0], atol=1e-9), "stage chain placed the vertices otherwise"
     assert np.array_equal(a[2]["material"], b[2]["material"]), "stage chain labelled otherwise"
     assert len(np.unique(a[2]["material"])) == 4, np.unique(a[2]["material"])
     assert fetch(bnd).GetNumberOfLines() == fetch(whole, 1).GetNumberOfLines()
