@@ -172,7 +172,8 @@ def _start(sites, labels_of, hi, feats, w):
 
 
 def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
-                 max_iter=DEFAULTS.max_iter, progress=None):
+                 max_iter=DEFAULTS.max_iter, progress=None,
+                 energy_rtol_3d=DEFAULTS.energy_rtol_3d):
     """Lloyd iterations of the voxel CVT, in physical units, with box-keeping site classes.
 
     Each voxel belongs to the region of its nearest site (physical Euclidean distance from
@@ -216,6 +217,10 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
         Voxel spacing (sx, sy, sz), each > 0.
     tol_px : float, optional
         Stop when the largest site move is below ``tol_px`` times the smallest spacing.
+    energy_rtol_3d : float, optional
+        Also stop when an iteration lowers the energy by less than this share of it (the
+        energy of a voxel CVT flattens long before the sites stop moving by ``tol_px``);
+        0 turns this off.
     max_iter : int, optional
         Iteration cap.
     progress : callable, optional
@@ -242,6 +247,7 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
     ((8, 10, 12), True, 8)
     """
     rho, sites, sp, hi, tol_px, max_iter = _check(rho, sites, spacing, tol_px, max_iter)
+    energy_rtol = check("energy_rtol_3d", energy_rtol_3d)
     nz, ny, nx = rho.shape
     sx, sy, sz = (float(v) for v in sp)
     w = np.ascontiguousarray(rho.ravel())
@@ -299,6 +305,8 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
             progress(it, max_iter)
         if move < tol_px * sp.min():
             converged = True
+            break
+        if energy[-2] - energy[-1] < energy_rtol * energy[-2]:
             break
     keep = _not_coincident(sites, cls, _COINCIDENT_VOXELS * sp.min())
     if not keep.all():

@@ -94,6 +94,10 @@ class CVTParams(_Group):
                            "px", low=0.0, high=10.0, low_open=True, vtk="Tolerance")
     max_iter: int = _param(200, "int", "Lloyd iteration cap", low=1, high=100_000,
                            vtk="MaximumIterations")
+    energy_rtol_3d: float = _param(1e-5, "float", "the 3D Lloyd also stops when an "
+                                   "iteration lowers the CVT energy by less than this share "
+                                   "of it (0 = only tol_px and max_iter)", low=0.0, high=1.0,
+                                   vtk="EnergyTolerance3D")
 
 
 @dataclass(frozen=True)
@@ -201,6 +205,11 @@ class CorrectionParams(_Group):
     streak_min_explained: float = _param(0.05, "float", "a streak correction that removes "
                                          "less of the within-material variance is not "
                                          "applied", low=0.0, high=1.0)
+    streak_model: str = _param("square", "choice", "streak model: metal path length L "
+                               "squared, or also L cubed and L times the other materials' "
+                               "path", choices=("square", "polynomial"), vtk="StreakModel")
+    streak_min_gain: float = _param(0.2, "float", "polynomial model only where it removes this "
+                                    "share of what the square one leaves", low=0.0, high=1.0)
     blur_correction: bool = _param(True, "bool", "take off the edge blur the first labelling "
                                    "predicts and label again", cli="--no-blur-correction")
     blur_min_self_weight: float = _param(0.8, "float", "floor of a triangle's self weight in "

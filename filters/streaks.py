@@ -19,12 +19,13 @@ class MetalStreakFilter(CTSegAlgorithm):
     later stages (density map, triangle gray, graph cut) take the image.
     Parameters: what ``correct_streaks`` reads (``ctseg params``): the levels group
     (which tells the materials apart), DensityFloor and DensitySaturation (which find the
-    flat pixels), StreakSigma, StreakMargin, StreakRounds, StreakMinExplained.
+    flat pixels), StreakSigma, StreakMargin, StreakRounds, StreakMinExplained, StreakModel,
+    StreakMinGain.
     """
 
     PARAMETERS = spec_names("levels", names=(
         "density_floor", "density_saturation", "streak_sigma_px", "streak_margin_px",
-        "streak_rounds", "streak_min_explained"))
+        "streak_rounds", "streak_min_explained", "streak_model", "streak_min_gain"))
 
     def __init__(self):
         super().__init__(input_type="vtkImageData", output_type="vtkImageData")

@@ -3,8 +3,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-import ctseg.beam_hardening as bh
-from ctseg.beam_hardening import correct_metal_streaks, fit_streak_weight, metal_streak_basis
+import ctseg.streak_basis as streak_basis
+from ctseg.beam_hardening import (correct_metal_streaks, fit_streak_weight, fit_streak_weights,
+                                   metal_streak_basis, streak_bases)
 from ctseg.errors import InputError, ParameterError
 from ctseg.phantoms import make_phantom
 from ctseg.levels import flat_pixels
@@ -44,13 +45,23 @@ def test_known_streak_artifact_is_removed():
     w = 0.3 / np.abs(basis[away]).max()  # streaks up to 30% of the aluminium level
     rng = np.random.default_rng(1)
     seen = truth - w * basis + rng.normal(0, 0.02, truth.shape)  # dark streaks + noise
-    out = correct_metal_streaks(seen, [0.0, 1.0, 5.0])
+    out = correct_metal_streaks(seen, [0.0, 1.0, 5.0], streak_model="square")
     assert out.weight == pytest.approx(w, rel=0.03)
     assert out.explained > 0.5
     err_before = np.abs(seen - truth)[away].mean()
     err_after = np.abs(out.image - truth)[away].mean()
     assert err_after < 0.7 * err_before
     assert np.abs(out.image - truth)[away].max() < 0.15
+    # a pure L^2 artifact: the polynomial model gains too little over the square one and
+    # gives way to it; with no gain asked it is kept and corrects as well
+    poly = correct_metal_streaks(seen, [0.0, 1.0, 5.0], streak_model="polynomial")
+    assert poly.weights == out.weights and len(poly.weights) == 1
+    np.testing.assert_array_equal(poly.image, out.image)
+    forced = correct_metal_streaks(seen, [0.0, 1.0, 5.0], streak_model="polynomial",
+                                   streak_min_gain=0.0)
+    assert len(forced.weights) == 3 and forced.explained >= out.explained - 1e-9
+    assert np.abs(forced.image - truth)[away].mean() < 0.7 * err_before
+    assert np.abs(forced.image - truth)[away].max() < 0.15
 
 
 def test_nothing_to_correct_leaves_the_image_alone():
@@ -76,7 +87,7 @@ def test_nothing_to_correct_leaves_the_image_alone():
 def test_coarse_basis_follows_the_full_size_one(monkeypatch):
     _, metal = part((150, 150))
     full = metal_streak_basis(metal)
-    monkeypatch.setattr(bh, "BASIS_MAX_PX", 75)  # 2x coarser, as on a 512 px slice
+    monkeypatch.setattr(streak_basis, "BASIS_MAX_PX", 75)  # 2x coarser, as on a 512 px slice
     coarse = metal_streak_basis(metal)
     assert coarse.shape == full.shape
     away = ~ndimage.binary_dilation(metal, iterations=6)
@@ -117,3 +128,92 @@ def test_simulated_beam_hardening_is_reduced():
     assert spread(out.image) < 0.8 * spread(img)
     again = correct_metal_streaks(img, levels, flat=flat)
     np.testing.assert_array_equal(again.image, out.image)
+
+
+def test_several_bases_fit_equals_least_squares_with_class_means():
+    rng = np.random.default_rng(5)
+    img = rng.normal(size=(20, 30))
+    bases = [rng.normal(size=(20, 30)) for _ in range(3)]
+    classes = rng.integers(0, 3, size=(20, 30))
+    mask = rng.random((20, 30)) < 0.7
+    w, explained = fit_streak_weights(img, bases, classes, mask)
+    cols = [b[mask] for b in bases] + [(classes[mask] == k).astype(float) for k in range(3)]
+    coef = np.linalg.lstsq(np.column_stack(cols), img[mask], rcond=None)[0]
+    np.testing.assert_allclose(w, -coef[:3], rtol=1e-8)
+    one = fit_streak_weight(img, bases[0], classes, mask)
+    np.testing.assert_allclose(fit_streak_weights(img, bases[:1], classes, mask)[0], [one[0]],
+                               rtol=1e-10)
+    assert 0.0 <= explained <= 1.0
+
+
+def plate_with_inserts(n=128):
+    """A plate (1.0) with four metal discs (5.0) in a row along it, tilted: truth, metal."""
+    yy, xx = np.mgrid[0:n, 0:n]
+    a = 0.2
+    u = (xx - n / 2) * np.cos(a) + (yy - n / 2) * np.sin(a)
+    v = -(xx - n / 2) * np.sin(a) + (yy - n / 2) * np.cos(a)
+    img = np.zeros((n, n))
+    img[(np.abs(u) <= 0.36 * n) & (np.abs(v) <= 0.2 * n)] = 1.0
+    metal = np.zeros((n, n), bool)
+    for x0 in np.linspace(-0.25, 0.25, 4) * n:
+        metal |= (u - x0) ** 2 + v ** 2 <= (0.045 * n) ** 2
+    img[metal] = 5.0
+    return img, metal
+
+
+def test_bands_between_several_inserts_are_removed():
+    # the dark bands along a row of inserts in a plate: rays through metal *and* a long
+    # stretch of plate harden more than L^2 says (a cross term L * P), and the long metal
+    # paths less (L^3); the square model leaves the bands, the polynomial one removes most
+    truth, metal = plate_with_inserts()
+    plate = (truth > 0) & ~metal
+    sq, cube, cross = streak_bases(metal, plate, model="polynomial")
+    away = ~ndimage.binary_dilation(metal, iterations=3)
+    art = 0.5 * sq / np.abs(sq[away]).max() + 0.5 * cross / np.abs(cross[away]).max() \
+        - 0.1 * cube / np.abs(cube[away]).max()
+    rng = np.random.default_rng(2)
+    noise = rng.normal(0, 0.02, truth.shape)
+    seen = truth - art + noise  # bands down to about half the plate's level
+    fit = ndimage.binary_erosion(plate, iterations=2) & away
+    err_before = np.abs(seen - noise - truth)[fit].mean()
+    fixed = correct_metal_streaks(seen, [0.0, 1.0, 5.0], streak_model="polynomial")
+    old = correct_metal_streaks(seen, [0.0, 1.0, 5.0], streak_model="square")
+    assert fixed.weight > 0 and len(fixed.weights) == 3
+    err_new = np.abs(fixed.image - noise - truth)[fit].mean()
+    err_old = np.abs(old.image - noise - truth)[fit].mean()
+    assert err_new < 0.35 * err_before
+    assert err_new < 0.5 * err_old
+    assert fixed.explained > old.explained + 0.3
+
+
+def test_simulated_multi_insert_plate_is_flattened_more_by_the_polynomial_model():
+    # ctseg.phantoms' polychromatic simulation (its own ray-driven projector) of a plate
+    # with a row of steel inserts: the polynomial model flattens the plate more
+    from ctseg.phantoms import simulate_ct
+    n, s = 128, 2
+    truth, metal = plate_with_inserts(n * s)
+    lab = np.where(metal, 2, (truth > 0).astype(int)).astype(np.uint8)
+    img = simulate_ct(lab, s, materials=("air", "aluminium", "steel"), pixel_mm=0.6, seed=3)
+    img = img.astype(float)
+    lab_px = lab[::s, ::s]
+    levels = [np.median(img[lab_px == k]) for k in range(3)]
+    flat = flat_pixels(img)
+    keep = ndimage.binary_erosion(lab_px == 1, iterations=2)
+    keep &= ~ndimage.binary_dilation(lab_px == 2, iterations=3)
+
+    def spread(im):
+        return float(((im[keep] - im[keep].mean()) ** 2).sum())
+    old = correct_metal_streaks(img, levels, flat=flat, streak_model="square")
+    new = correct_metal_streaks(img, levels, flat=flat, streak_model="polynomial")
+    assert new.weight > 0 and new.explained > old.explained
+    assert spread(new.image) < 0.8 * spread(old.image) < 0.8 * spread(img)
+
+
+def test_bad_streak_model_is_refused():
+    truth, metal = part((20, 20))
+    with pytest.raises(ParameterError, match="streak_model"):
+        correct_metal_streaks(truth, [0.0, 1.0, 5.0], streak_model="cubic")
+    with pytest.raises(ParameterError, match="model"):
+        streak_bases(metal, model="cubic")
+    with pytest.raises(ParameterError, match="other"):
+        streak_bases(metal, model="polynomial")

@@ -41,7 +41,9 @@ def test_each_filter_declares_its_stage_parameters():
                                               "ward_block_px"} | _group("cvt")
     assert set(MetalStreakFilter.PARAMETERS) == _group("levels") | {
         "density_floor", "density_saturation", "streak_sigma_px", "streak_margin_px",
-        "streak_rounds", "streak_min_explained"}
+        "streak_rounds", "streak_min_explained", "streak_model", "streak_min_gain"}
+    assert set(SubpixelBoundaryFilter.PARAMETERS) == {"subpixel_boundary", "subpixel_max_shift",
+                                                      "gray_levels"}
     assert set(GraphCutSegmentFilter.PARAMETERS) == _group("levels", "graphcut", "recursion") | {
         "density_floor", "density_saturation", "blur_correction", "blur_min_self_weight",
         "blur_max_px"}
@@ -137,7 +139,10 @@ def test_stage_filters_take_exactly_what_their_functions_read():
     assert READ == set(GraphCutSegmentFilter.PARAMETERS), READ ^ set(GraphCutSegmentFilter.PARAMETERS)
     keywords = lambda fn: set(list(inspect.signature(fn).parameters)[1:])  # noqa: E731
     assert keywords(ctseg.density_map) == set(DensityMapFilter.PARAMETERS)
-    cvt = (keywords(ctseg.initial_sites) | keywords(ctseg.lloyd_cvt)) - {"sites", "progress"}
+    from ctseg.cvt3d import lloyd_cvt_3d
+
+    cvt = (keywords(ctseg.initial_sites) | keywords(ctseg.lloyd_cvt)
+           | keywords(lloyd_cvt_3d)) - {"sites", "progress", "spacing"}
     # n_sites defaults: pixels_per_site for a slice, voxels_per_site for a volume
     assert cvt | {"pixels_per_site", "voxels_per_site"} == set(CVTSitesFilter.PARAMETERS)
 
@@ -210,7 +215,8 @@ def test_paraview_proxies_names_menus_ports(paraview_plugin):
         assert proxy_kw["name"] == name and proxy_kw["label"].startswith("CT ")
         assert ((paraview_plugin.MENU,), {}) in _calls(cls, "smhint.xml")
         ports = [kw["name"] for _, kw in _calls(cls, "smproperty.input")]
-        assert ports == (["Mesh", "Image"] if name in ("CTTriangleGray", "CTGraphCut", "CTSubpixelBoundary") else ["Input"])
+        two = ("CTTriangleGray", "CTGraphCut", "CTSubpixelBoundary")
+        assert ports == (["Mesh", "Image"] if name in two else ["Input"])
     outputs = [a[0] for a, _ in _calls(paraview_plugin.CTSegment, "smproperty.xml") if "OutputPort" in a[0]]
     assert len(outputs) == 2
 

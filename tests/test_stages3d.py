@@ -209,6 +209,22 @@ def test_energy_never_increases_and_is_f(runs, name):
     assert np.isclose(e[-1], np.prod(sp) * np.sum(rho.ravel() * np.sum(d * d, axis=1)))
 
 
+def test_energy_tolerance_stops_where_the_energy_flattens():
+    """energy_rtol_3d stops Lloyd at the first iteration that lowers the energy by less
+    than that share; 0 runs on to tol_px / max_iter, through the same iterates."""
+    make, sp, n, init = CASES["ward"]
+    rho = density_volume(make(), sp)
+    start = initial_sites_3d(rho, n, sp, init=init, seed=1)
+    full = lloyd_cvt_3d(rho, start, sp, energy_rtol_3d=0.0, max_iter=80)
+    rtol = 1e-3
+    early = lloyd_cvt_3d(rho, start, sp, energy_rtol_3d=rtol, max_iter=80)
+    e = np.array(full.energy)
+    drops = (e[:-1] - e[1:]) / e[:-1]
+    first = int(np.argmax(drops < rtol)) + 1
+    assert drops.min() < rtol and early.n_iter == first < full.n_iter
+    np.testing.assert_allclose(early.energy, e[:first + 1], rtol=1e-12)
+
+
 @pytest.mark.parametrize("name", list(CASES))
 def test_regions_are_nearest_sites(runs, name):
     rho, sp, r = runs[name]
