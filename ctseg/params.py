@@ -94,10 +94,10 @@ class CVTParams(_Group):
                            "px", low=0.0, high=10.0, low_open=True, vtk="Tolerance")
     max_iter: int = _param(200, "int", "Lloyd iteration cap", low=1, high=100_000,
                            vtk="MaximumIterations")
-    energy_rtol_3d: float = _param(1e-5, "float", "the 3D Lloyd also stops when an "
+    energy_rtol_3d: float = _param(0.0, "float", "the 3D Lloyd also stops when an "
                                    "iteration lowers the CVT energy by less than this share "
-                                   "of it (0 = only tol_px and max_iter)", low=0.0, high=1.0,
-                                   vtk="EnergyTolerance3D")
+                                   "of it (0 = off: only tol_px and max_iter)", low=0.0,
+                                   high=1.0, vtk="EnergyTolerance3D")
 
 
 @dataclass(frozen=True)

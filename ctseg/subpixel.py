@@ -21,7 +21,8 @@ BACKTRACK_STEPS = 4
 
 def material_levels_of_mesh(gray, area, material, interior, n_materials):
     """Each material's level: the area-weighted median gray of its triangles away from the
-    boundary (all its triangles where it has none of those).
+    boundary, or of all its triangles where those cover less than half its area (small
+    parts: a few interior triangles there can be stray ones).
 
     Example
     -------
@@ -34,7 +35,7 @@ def material_levels_of_mesh(gray, area, material, interior, n_materials):
     levels = np.full(n_materials, np.nan)
     for k in range(n_materials):
         sel = (material == k) & interior
-        if not sel.any():
+        if area[sel].sum() < 0.5 * area[material == k].sum():
             sel = material == k
         if sel.any():
             g, w = gray[sel], area[sel]
