@@ -84,6 +84,16 @@ def test_levels_outside_the_data_are_refused():
             ctseg.segment_volume(vol, mode=mode, gray_levels=(-5, 40))
 
 
+def test_a_level_missing_from_some_slices_is_not_refused():
+    """Slices mode checks the levels against the volume, not slice by slice."""
+    img, truth = _three_regions()
+    vol = np.stack([img[::2, ::2]] * 4)
+    vol[:2] = np.where(vol[:2] > 100, 40.0, vol[:2])  # no bright material in slices 0-1
+    seg = ctseg.segment_volume(vol, mode="slices", n_sites=150, gray_levels=(40, 44, 200))
+    assert np.allclose(seg.material_gray, [40, 44, 200])
+    assert 2 not in seg.slices[0].material and 2 in seg.slices[3].material
+
+
 def test_volumes_take_the_given_levels_in_both_modes():
     img, truth = _three_regions()
     vol = np.stack([img[::2, ::2]] * 8)
