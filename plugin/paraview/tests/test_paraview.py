@@ -95,8 +95,9 @@ def _():
     dice = dice_per_label(labels_per_slice(mesh, GEOM, phantom.image.shape), truth, 4)
     print("    Dice per material with the true levels given:", np.round(dice, 3))
     assert min(dice) >= 0.75 and min(dice[0], dice[2], dice[3]) >= 0.93, dice
+    # levels in the wrong units (outside the data's gray range): refused, output empty
     bad = CTSegment(Input=volume_reader, NumberOfSites=350, NumberOfJobs=1,  # noqa: F821
-                    GrayLevels=f"{levels[1]}, {levels[0]}")  # not ascending
+                    GrayLevels="1000000, 2000000")
     bad.UpdatePipeline()
     data = servermanager.Fetch(bad)
     assert data is None or data.GetNumberOfCells() == 0
