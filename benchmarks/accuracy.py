@@ -135,6 +135,15 @@ def table(results):
     return "\n".join(rows)
 
 
+def write_results(out, md, results):
+    """The markdown table to ``out`` and the results beside it as JSON (same name, .json)."""
+    os.makedirs(os.path.dirname(out) or ".", exist_ok=True)
+    with open(out, "w") as fh:
+        fh.write(md + "\n")
+    with open(os.path.splitext(out)[0] + ".json", "w") as fh:
+        json.dump(results, fh, indent=1)
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default=None)
@@ -148,19 +157,11 @@ if __name__ == "__main__":
         md = granular_table(pairs)
         print(md)
         if args.out:
-            os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
-            with open(args.out, "w") as fh:
-                fh.write(md + "\n")
-            with open(os.path.splitext(args.out)[0] + ".json", "w") as fh:
-                json.dump([list(p) for p in pairs], fh, indent=1)
+            write_results(args.out, md, [list(p) for p in pairs])
         raise SystemExit(0)
     cases = HELD_OUT if args.held_out else CASES + (SWEEP if args.sweep else [])
     results = [run_case(*c) for c in cases]
     md = table(results)
     print(md)
     if args.out:
-        os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
-        with open(args.out, "w") as fh:
-            fh.write(md + "\n")
-        with open(os.path.splitext(args.out)[0] + ".json", "w") as fh:
-            json.dump(results, fh, indent=1)
+        write_results(args.out, md, results)

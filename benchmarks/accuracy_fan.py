@@ -20,12 +20,13 @@ material (found materials numbered 0.. by ascending gray, with that gray).
 About 3-5 min.
 """
 import argparse
-import json
 import os
 import subprocess
 import time
 
 import numpy as np
+
+from accuracy import write_results  # benchmarks/ is this script's folder
 
 import ctseg
 from ctseg.metrics import dice_per_label, evaluate
@@ -155,8 +156,4 @@ if __name__ == "__main__":
           + md)
     print(md)
     if args.out:
-        os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
-        with open(args.out, "w") as fh:
-            fh.write(md + "\n")
-        with open(os.path.splitext(args.out)[0] + ".json", "w") as fh:
-            json.dump(results, fh, indent=1)
+        write_results(args.out, md, results)

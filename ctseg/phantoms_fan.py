@@ -30,6 +30,7 @@ import numpy as np
 from scipy import ndimage
 
 from .fan_beam import Scene, fan_fbp, fan_geometry, path_lengths
+from .phantoms import Phantom
 from .xray_spectra import effective_attenuation, linear_attenuation, tungsten_spectrum
 
 PARTS = ("inserts", "ceramic", "composite")
@@ -37,18 +38,11 @@ PARTS = ("inserts", "ceramic", "composite")
 
 
 @dataclass
-class FanPhantom:
-    """A simulated fan-beam slice: ``image`` (float32 in 1/cm, or uint8 when clipped to 8
-    bits), ``truth`` (uint8 labels per pixel), ``truth_hr`` (labels at ``supersample``
-    sub-pixels per side), ``names`` (label k = names[k], ascending attenuation),
-    ``pixel_mm``, the 8-bit ``window`` (1/cm, or None) and the simulation's settings."""
+class FanPhantom(Phantom):
+    """A simulated fan-beam slice: :class:`ctseg.phantoms.Phantom`'s fields (``image``
+    float32 in 1/cm, or uint8 when clipped to 8 bits), plus the 8-bit ``window`` (1/cm, or
+    None) and the simulation's settings."""
 
-    image: np.ndarray
-    truth: np.ndarray
-    truth_hr: np.ndarray
-    supersample: int
-    names: tuple
-    pixel_mm: float
     window: tuple = None
     settings: dict = field(default_factory=dict)
 
