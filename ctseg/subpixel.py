@@ -9,7 +9,7 @@ from .errors import InputError, ParameterError
 from .params import DEFAULTS
 from .recursive_cut import order_by_gray
 from .triangle_gray import triangle_gray
-from .triangulation import triangle_areas
+from .triangulation import triangle_areas, triangle_edges
 
 MIN_AREA_RATIO = 0.2
 """A move is refused when it leaves an incident triangle with less than this share of its
@@ -45,10 +45,18 @@ def material_levels_of_mesh(gray, area, material, interior, n_materials):
     return levels
 
 
-def _signed_areas(points, triangles):
-    p = points[triangles]
-    return 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
-                  - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+def _vertex_materials(triangles, material, n_points):
+    """Per vertex: the lowest and highest material of its triangles, and how many
+    different ones (-1, -1, 0 for a vertex of no triangle)."""
+    pairs = np.unique(np.column_stack([triangles.ravel(), np.repeat(material, 3)]), axis=0)
+    count = np.bincount(pairs[:, 0], minlength=n_points)
+    lo = np.full(n_points, -1)
+    hi = np.full(n_points, -1)
+    first = np.searchsorted(pairs[:, 0], np.arange(n_points))
+    has = count > 0
+    lo[has] = pairs[first[has], 1]
+    hi[has] = pairs[first[has] + count[has] - 1, 1]
+    return lo, hi, count
 
 
 def place_boundary_vertices(points, triangles, material, image, levels, *,
@@ -135,16 +143,8 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
     if len(tri) == 0 or len(lv) < 2:
         return moved, 0
     n = len(pts)
-    # the materials around each vertex (pairs sorted by vertex, then material): a < b
     vt_v, vt_t = tri.ravel(), np.repeat(np.arange(len(tri)), 3)
-    pairs = np.unique(np.column_stack([vt_v, mat[vt_t]]), axis=0)
-    count = np.bincount(pairs[:, 0], minlength=n)
-    lo = np.full(n, -1)
-    hi = np.full(n, -1)
-    first = np.searchsorted(pairs[:, 0], np.arange(n))
-    has = count > 0
-    lo[has] = pairs[first[has], 1]
-    hi[has] = pairs[first[has] + count[has] - 1, 1]
+    lo, hi, count = _vertex_materials(tri, mat, n)
     xmin, ymin = pts.min(axis=0)
     xmax, ymax = pts.max(axis=0)
     border = (np.isclose(pts[:, 0], xmin) | np.isclose(pts[:, 0], xmax)
@@ -154,7 +154,7 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
     if len(cand) == 0:
         return moved, 0
     # shortest incident edge per vertex
-    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    e = triangle_edges(tri)[0]
     elen = np.hypot(*(pts[e[:, 0]] - pts[e[:, 1]]).T)
     shortest = np.full(n, np.inf)
     np.minimum.at(shortest, e[:, 0], elen)
@@ -191,7 +191,7 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
     if len(cand) == 0:
         return moved, 0
     # each vertex alone: no incident triangle inverted or squashed, else half the shift
-    area0 = _signed_areas(pts, tri)
+    area0 = triangle_areas(pts, tri)
     inc_t = vt_t[np.argsort(vt_v, kind="stable")]
     starts = np.concatenate([[0], np.cumsum(np.bincount(vt_v, minlength=n))])
     accepted = np.zeros(len(cand), bool)
@@ -208,7 +208,7 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
     # together: undo the moves around any triangle the combination spoils
     active = np.ones(len(cand), bool)
     for _ in range(len(cand) + 1):
-        bad = _signed_areas(moved, tri) < MIN_AREA_RATIO * area0
+        bad = triangle_areas(moved, tri) < MIN_AREA_RATIO * area0
         if not bad.any():
             break
         spoiled = np.isin(cand, np.unique(tri[bad])) & active
@@ -229,8 +229,7 @@ def _moves_valid(pts, tri, area0, inc_t, starts, verts, targets):
     p = pts[tri[t]].copy()
     slot = tri[t] == verts[owner][:, None]
     p[slot] = targets[owner]
-    area = 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
-                  - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+    area = triangle_areas(p.reshape(-1, 2), np.arange(3 * len(p)).reshape(-1, 3))
     ok_t = area >= MIN_AREA_RATIO * area0[t]
     return np.bincount(owner, ~ok_t, len(verts)) == 0
 
@@ -287,11 +286,7 @@ def subpixel_mesh(image, points, triangles, gray, material,
         return MovedMesh(pts.copy(), new_gray, mat, np.zeros(0) if renumber else None, 0)
     n_mat = int(mat.max()) + 1
     # vertices between materials: their triangles do not measure a material's level
-    lo = np.full(len(pts), n_mat)
-    hi = np.full(len(pts), -1)
-    np.minimum.at(lo, tri.ravel(), np.repeat(mat, 3))
-    np.maximum.at(hi, tri.ravel(), np.repeat(mat, 3))
-    interior = ~(lo != hi)[tri].any(axis=1)
+    interior = ~(_vertex_materials(tri, mat, len(pts))[2] > 1)[tri].any(axis=1)
     area = triangle_areas(pts, tri)
     levels = material_levels_of_mesh(new_gray, area, mat, interior, n_mat)
     moved, n_moved = place_boundary_vertices(pts, tri, mat, image, levels,
