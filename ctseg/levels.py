@@ -8,7 +8,8 @@ from .density import density_map
 from .geometry import slice_axis, volume_slice
 from .intensity import gray_scale, rescale_gray
 from .levels_auto import (FLAT_TRUST_FRACTION, clipped_extremes, level_report, level_sample,
-                          low_gradient_pixels, otsu_candidates, otsu_thresholds)
+                          low_gradient_pixels, otsu_candidates, otsu_levels, otsu_thresholds,
+                          tail_levels)
 from .levels_given import check_gray_levels, given_levels_255
 from .params import AUTO, DEFAULTS, check
 
@@ -258,7 +259,9 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
       pixels are low-gradient (quantized or windowed data), multi-level Otsu of all the
       pixels gives the levels instead: k the largest, up to 6, for which
       every k' <= k keeps adjacent class means at least that separation apart (sigma
-      from the flat pixels), used if it is more levels than the flat pixels gave.
+      from the flat pixels), used if it is more levels than the flat pixels gave. Then
+      (n_materials 'auto'), a phase too fine to leave a low-gradient pixel gets a level
+      beyond the outermost ones (:func:`ctseg.levels_auto.tail_levels`).
 
     Given ``gray_levels`` (input units), those are the levels (:func:`given_levels_255`).
 
@@ -331,7 +334,7 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
                   f"partial-volume pixels counted as flat")
     elif n_mat == AUTO and len(levels) < 2:
         reason = "the flat pixels give a single level"
-    method, low, k_cand = "flat_pixels", None, None
+    method, low, k_cand, tail = "flat_pixels", None, None, []
     base = max(merge_floor_255, merge_k * sigma)
     if reason is not None:
         # the clipped voxels are left out: they would make the noise look like zero
@@ -341,19 +344,13 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
             if reason != "the flat pixels give a single level" or len(lv2) + len(clipped) > 1:
                 levels, sigma, method = lv2, sig2, "low_gradient"
                 base = max(merge_floor_255, merge_k * sigma)
-        elif n_mat == AUTO and merge_threshold_255 == AUTO:
-            # too few low-gradient pixels (quantized or windowed data): multi-level Otsu
-            # of all the pixels, k the largest whose adjacent class means all keep the
-            # separation the rule asks for
-            sm = level_sample(g255)
-            k_cand = otsu_candidates(sm, lambda g: base + merge_rel * g)
-            k_ok = 1
-            for c in k_cand[1:]:
-                if c["min_gap_over_separation"] < 1.0:
-                    break
-                k_ok = c["k"]
-            if k_ok > len(levels):
-                levels, method = np.array(k_cand[k_ok - 1]["levels_255"]), "otsu_all_pixels"
+        elif n_mat == AUTO and merge_threshold_255 == AUTO:  # quantized or windowed data
+            lv2, k_cand = otsu_levels(g255, lambda g: base + merge_rel * g)
+            if len(lv2) > len(levels):
+                levels, method = lv2, "otsu_all_pixels"
+        if n_mat == AUTO and merge_threshold_255 == AUTO:
+            tail = tail_levels(g255, levels, lambda g: base + merge_rel * g, keep)
+            levels = np.sort(np.append(levels, tail))
     if report is not None:
         if k_cand is None:
             sel = {"low_gradient": low, "flat_pixels": flat if n_flat >= 16 else None}[method]
@@ -367,7 +364,7 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
         levels = np.sort(np.append(levels[~near], c))
     if report is not None:
         report.update(level_report(method, reason, flat, flat_levels, low, k_cand, levels,
-                                   sigma, clip_lo, clip_hi, clip_levels))
+                                   sigma, clip_lo, clip_hi, clip_levels, tail))
     return levels, sigma
 
 

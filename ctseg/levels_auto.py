@@ -85,6 +85,56 @@ CLIP_MIN_VOXELS = 8
 """Voxels at an extreme value that must touch another one (a region, not noise hits)."""
 
 
+TAIL_MIN_FRACTION = 0.01
+"""A material beyond the outermost level: at least this share of the pixels lies further
+than the level separation below the lowest level (or above the highest). Noise keeps a
+material's pixels within that separation and partial volume keeps them between the levels
+of the materials that mix, so such pixels need a material beyond; on a porous or granular
+scan it is the phase too fine to leave a flat pixel. Twice the share that the default
+rescale maps onto gray 0 (or 255)."""
+
+TAIL_LEVEL_PCT = 5.0
+"""The level of such a material: this percentile of the tail's pixels counted from the far
+end (its pure pixels sit at the far end, partial-volume ones towards the known level)."""
+
+
+def tail_levels(g255, levels, separation, mask=None):
+    """Levels of materials beyond the outermost ones found (:data:`TAIL_MIN_FRACTION`), on
+    the grays smoothed over 3 x 3 within each slice, as the levels are measured.
+
+    Parameters
+    ----------
+    g255 : (rows, cols) or (n, rows, cols) array_like
+        Grays on the 0-255 scale.
+    levels : (K,) array_like, ascending, K >= 1
+    separation : callable
+        The level separation at a gray (as :func:`ctseg.levels.pixel_material_levels`).
+    mask : bool array_like, the shape of ``g255``, optional
+        The pixels that count (e.g. all but clipped ones).
+
+    Returns
+    -------
+    added : list of float
+        At most one level below ``levels[0]`` and one above ``levels[-1]``.
+
+    Example
+    -------
+    >>> g = np.full((40, 40), 200.0); g[:, :8] = np.linspace(0.0, 150.0, 40)[:, None]
+    >>> [round(x, 1) for x in tail_levels(g, [200.0], lambda x: 20.0)]
+    [7.7]
+    """
+    g = np.asarray(g255, float)
+    sm = uniform_filter(g, (1,) * (g.ndim - 2) + (3, 3), mode="nearest")
+    v = sm.ravel() if mask is None else sm[np.asarray(mask, bool)]
+    lo, hi = float(levels[0]), float(levels[-1])
+    added = []
+    for beyond, pct in ((v < lo - separation(lo), TAIL_LEVEL_PCT),
+                        (v > hi + separation(hi), 100.0 - TAIL_LEVEL_PCT)):
+        if len(v) and beyond.sum() >= TAIL_MIN_FRACTION * len(v):
+            added.append(float(np.percentile(v[beyond], pct)))
+    return added
+
+
 def _gradient_gain(sigma_px):
     """The sd of one component of ``np.gradient`` of an image smoothed by a Gaussian of
     ``sigma_px``, per unit sd of white noise."""
@@ -214,8 +264,21 @@ def otsu_candidates(v, separation, k_max=6):
     return out
 
 
+def otsu_levels(g255, separation):
+    """Levels by multi-level Otsu of all the pixels (:func:`level_sample`): k the largest
+    (<= 6) for which every k' <= k keeps adjacent class means at least ``separation``
+    apart. Returns the levels and the candidates of :func:`otsu_candidates`."""
+    k_cand = otsu_candidates(level_sample(g255), separation)
+    k_ok = 1
+    for c in k_cand[1:]:
+        if c["min_gap_over_separation"] < 1.0:
+            break
+        k_ok = c["k"]
+    return np.array(k_cand[k_ok - 1]["levels_255"]), k_cand
+
+
 def level_report(method, reason, flat, flat_levels, low, k_cand, levels, sigma, clip_lo, clip_hi,
-                 clip_levels):
+                 clip_levels, tail=()):
     """The evidence of :func:`ctseg.levels.material_levels` as a JSON-ready dict."""
     n_vox = flat.size
     clipped = bool(clip_lo.any() or clip_hi.any())
@@ -234,7 +297,9 @@ def level_report(method, reason, flat, flat_levels, low, k_cand, levels, sigma, 
     return {
         "method": method,
         "reason": reason or "flat pixels trusted",
-        "criterion": criterion + ("; clipped ends are levels of their own" if clipped else ""),
+        "criterion": criterion + ("; clipped ends are levels of their own" if clipped else "")
+        + (f"; a material beyond the outermost levels where >= {TAIL_MIN_FRACTION:.0%} of the "
+           "pixels lie a separation beyond them" if tail else ""),
         "flat_fraction": round(float(flat.mean()), 4),
         "flat_levels_255": [round(float(x), 2) for x in flat_levels],
         "low_gradient_fraction": None if low is None else round(float(low.mean()), 4),
@@ -247,4 +312,5 @@ def level_report(method, reason, flat, flat_levels, low, k_cand, levels, sigma, 
         "clipped_low_fraction": round(float(clip_lo.sum() / n_vox), 6),
         "clipped_high_fraction": round(float(clip_hi.sum() / n_vox), 6),
         "clipped_levels_255": [round(c, 2) for c in clip_levels],
+        "tail_levels_255": [round(c, 2) for c in tail],
     }

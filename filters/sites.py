@@ -6,7 +6,7 @@ from vtkmodules.util import numpy_support
 from ctseg.cvt import lloyd_cvt
 from ctseg.errors import InputError
 from ctseg.params import AUTO
-from ctseg.pipeline import default_n_sites
+from ctseg.site_budget import site_budget
 from ctseg.sites import initial_sites
 from ctseg.stages3d import cvt_sites_3d
 
@@ -74,14 +74,19 @@ class CVTSitesFilter(CTSegAlgorithm):
     sites also have a ``site_class`` point array (0 free, 1 face, 2 edge, 3 corner,
     :data:`ctseg.cvt3d.SITE_CLASSES`), the exact box coordinates (:data:`BOX_POINTS`)
     and field data ``empty_regions``.
-    Parameters (``ctseg params``): NumberOfSites (per slice, or for the whole volume),
-    PixelsPerSite (slices) or VoxelsPerSite (volumes) when it is auto, Initialization,
+    Parameters (``ctseg params``): NumberOfSites (per slice, or for the whole volume);
+    when it is auto, a slice's count is :func:`ctseg.site_budget.site_budget` of the
+    input image (its gray scalars, as ``segment_image`` counts them: SiteRule,
+    PixelsPerSite, BoundaryPxPerSite, MinPixelsPerSite, DensitySigma) and a volume's
+    follows VoxelsPerSite; Initialization,
     Seed, WardBlockPixels (the initial sites) and the cvt group (Tolerance,
     MaximumIterations).
     """
 
-    PARAMETERS = spec_names("cvt", names=("n_sites", "pixels_per_site", "voxels_per_site",
-                                          "init", "seed", "ward_block_px"))
+    PARAMETERS = spec_names("cvt", names=("n_sites", "pixels_per_site", "site_rule",
+                                          "boundary_px_per_site", "min_pixels_per_site",
+                                          "density_sigma_px", "voxels_per_site", "init",
+                                          "seed", "ward_block_px"))
 
     def __init__(self):
         super().__init__(input_type="vtkImageData", output_type="vtkPolyData")
@@ -102,7 +107,9 @@ class CVTSitesFilter(CTSegAlgorithm):
         else:
             n_sites = p.n_sites
             if n_sites == AUTO:
-                n_sites = default_n_sites(rho.shape, p.pixels_per_site)
+                n_sites = site_budget(np.asarray(arr, np.float64), p.pixels_per_site,
+                                      p.boundary_px_per_site, p.min_pixels_per_site,
+                                      p.site_rule, p.density_sigma_px)[0]
             sites0 = initial_sites(rho, n_sites, init=p.init, seed=p.seed,
                                    ward_block_px=p.ward_block_px)
             self.UpdateProgress(0.2)

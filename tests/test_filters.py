@@ -225,6 +225,25 @@ def test_stage_parameters_reach_the_stage():
     np.testing.assert_allclose(polydata_to_arrays(s_out)[0], _world(cvt.sites, geom=ImageGeometry()))
 
 
+def test_auto_site_count_is_segment_images():
+    """NumberOfSites auto: the stage chain counts sites as segment_image does (the
+    boundary rule on the gray slice), here where edge length, not the size rule,
+    decides (a porous casting slice: far more sites than one per 128 px)."""
+    from ctseg.phantoms_granular import make_granular
+
+    img = make_granular("casting", 96, seed=0).image.astype(float)
+    seg = ctseg.segment_image(img, max_iter=1)
+    budget = seg.diagnostics["sites"]
+    assert budget["rule"] in ("boundary", "dense") and budget["n_sites"] > 2 * img.size / 128
+    sites = CVTSitesFilter()
+    sites.SetMaximumIterations(1)
+    out = sites.apply(DensityMapFilter().apply(array_to_image(img)))
+    assert out.GetNumberOfPoints() == len(seg.points)  # the sites and the border's
+    sites.SetSiteRule("area")
+    assert sites.apply(DensityMapFilter().apply(array_to_image(img))).GetNumberOfPoints() \
+        == len(ctseg.segment_image(img, max_iter=1, site_rule="area").points)
+
+
 def test_errors_are_reported_not_silent():
     from vtkmodules.vtkCommonCore import vtkOutputWindow, vtkStringOutputWindow
 

@@ -37,8 +37,9 @@ def _group(*groups):
 def test_each_filter_declares_its_stage_parameters():
     assert set(CTSegmentFilter.PARAMETERS) == set(SPECS)
     assert set(DensityMapFilter.PARAMETERS) == _group("density")
-    assert set(CVTSitesFilter.PARAMETERS) == {"n_sites", "pixels_per_site", "voxels_per_site", "init", "seed",
-                                              "ward_block_px"} | _group("cvt")
+    assert set(CVTSitesFilter.PARAMETERS) == {
+        "n_sites", "pixels_per_site", "site_rule", "boundary_px_per_site", "min_pixels_per_site",
+        "density_sigma_px", "voxels_per_site", "init", "seed", "ward_block_px"} | _group("cvt")
     assert set(MetalStreakFilter.PARAMETERS) == _group("levels") | {
         "density_floor", "density_saturation", "streak_sigma_px", "streak_margin_px",
         "streak_rounds", "streak_min_explained", "streak_model", "streak_min_gain"}
@@ -141,10 +142,12 @@ def test_stage_filters_take_exactly_what_their_functions_read():
     assert keywords(ctseg.density_map) == set(DensityMapFilter.PARAMETERS)
     from ctseg.cvt3d import lloyd_cvt_3d
 
-    cvt = (keywords(ctseg.initial_sites) | keywords(ctseg.lloyd_cvt)
+    from ctseg.site_budget import site_budget
+
+    cvt = (keywords(ctseg.initial_sites) | keywords(ctseg.lloyd_cvt) | keywords(site_budget)
            | keywords(lloyd_cvt_3d)) - {"sites", "progress", "spacing"}
-    # n_sites defaults: pixels_per_site for a slice, voxels_per_site for a volume
-    assert cvt | {"pixels_per_site", "voxels_per_site"} == set(CVTSitesFilter.PARAMETERS)
+    # n_sites auto: site_budget for a slice, voxels_per_site for a volume
+    assert cvt | {"voxels_per_site"} == set(CVTSitesFilter.PARAMETERS)
 
 
 # ------------------------------------------------------------------------- ParaView
