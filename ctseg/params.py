@@ -62,10 +62,10 @@ class SiteParams(_Group):
     pixels_per_site: float = _param(128.0, "float", "pixels per site when n_sites is auto: "
                                     "the least a slice gets (at least 16 sites, at most one "
                                     "per pixel)", "px", low=1.0, high=1e6)
-    site_rule: str = _param("boundary", "choice", "auto n_sites: one site per "
-                            "boundary_px_per_site px of boundary but at least one per "
-                            "pixels_per_site pixels, or one per pixels_per_site pixels "
-                            "only (the old rule)", choices=("boundary", "area"))
+    site_rule: str = _param("boundary", "choice", "auto n_sites: sites boundary_px_per_site "
+                            "px apart along the boundaries but at least one per pixels_per_site "
+                            "pixels (voxels_per_site in 3D), or that minimum only (the old "
+                            "rule)", choices=("boundary", "area"))
     boundary_px_per_site: float = _param(3.0, "float", "pixels of boundary length per site "
                                          "when n_sites is auto (site_rule boundary)", "px",
                                          low=0.5, high=1e6)
@@ -76,8 +76,8 @@ class SiteParams(_Group):
                        choices=("ward", "random", "density_random"), vtk="Initialization")
     seed: int = _param(0, "int", "seed of the random initialisations", low=0,
                        high=2 ** 31 - 1, cli="--seed")
-    voxels_per_site: float = _param(180.0, "float", "voxels per site in 3D mode when n_sites is "
-                                    "auto (at least 64 sites, at most one per voxel)",
+    voxels_per_site: float = _param(180.0, "float", "3D mode, n_sites auto: the least a volume "
+                                    "gets, one site per this many voxels (at least 64)",
                                     "voxels", low=1.0, high=1e9)
     ward_block_px: int = _param(AUTO, "int", "Ward pre-merge block side (1 = exact Ward; in "
                                 "3D along the finest axis); auto = about 16 blocks per site", "px", low=1, high=1024,

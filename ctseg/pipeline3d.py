@@ -13,6 +13,7 @@ from .errors import InputError
 from .levels import volume_levels
 from .params import resolve
 from .pipeline import stage_runner
+from .resources import SITE_3D_BYTES, VOLUME_3D_BYTES_PER_VOXEL, check_memory
 from .stages3d import (cvt_sites_3d, default_n_sites_3d, density_3d,  # noqa: F401 (re-export)
                        label_tetrahedra, n_sites_3d, tetrahedra_3d)
 from .surfaces import material_interfaces, material_surface
@@ -149,7 +150,12 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
                 streak_weights.append(float(fix.weight))
             return out
         image = timed("streak_correction", 0.02, correct)
-    n_sites = n_sites_3d(image.shape, p)
+    n_sites, site_report = timed("site_budget", 0.04, n_sites_3d, image, p)
+    check_memory(max(0, n_sites - default_n_sites_3d(image.shape, p.voxels_per_site))
+                 * SITE_3D_BYTES + image.size * VOLUME_3D_BYTES_PER_VOXEL,
+                 f"meshing a {' x '.join(map(str, image.shape))} volume with {n_sites} sites "
+                 "in 3D", "set n_sites or site_rule='area', crop or downsample it, or use "
+                 "slices mode")
     rho = timed("density", 0.05, density_3d, image, p, sp)
     cvt = cvt_sites_3d(rho, p, sp, n_sites=n_sites, timed=timed,
                        progress=lambda it, n: report(0.2 + 0.5 * it / max(n, 1), "cvt"))
@@ -174,6 +180,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "volume_shape": list(vol.shape),
         "spacing": [float(v) for v in sp],
         "n_sites": int(n_sites),
+        "sites": site_report,
         "n_vertices": int(len(mesh.points)),
         "n_tetrahedra": int(len(mesh.tetrahedra)),
         "n_interface_triangles": int(len(faces)),

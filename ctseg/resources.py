@@ -21,6 +21,12 @@ measured 739 MiB for a 160^3 volume, 189 bytes per voxel with the input and the
 interpreter (benchmarks/results/volume3d.md)."""
 
 
+SITE_3D_BYTES = 12 * 1024
+"""Peak memory of the 3D mode per site beyond the default density (one per
+``voxels_per_site`` voxels), with a 2x margin: 12000 -> 30000 sites on a 61 x 100 x 100 snow
+volume raised the peak by 97 MiB, 5.6 KiB per site (tetrahedra, overlaps, blur pass)."""
+
+
 def available_bytes():
     """Memory the system can still give (MemAvailable), or None where unknown."""
     try:

@@ -124,6 +124,23 @@ def boundary_length(image, density_sigma_px=DEFAULTS.density_sigma_px):
     return float(edges.sum() / MEAN_RIDGE_DENSITY), edges
 
 
+def _choose(n_area, n_bound, n_dense, n_cap, measure, spacing, per_area, per_bound, per_cap,
+            unit):
+    """The boundary rule's choice among its terms (:func:`site_budget`): the larger of
+    n_boundary and n_dense, at least n_area, at most n_cap; which term decided and why."""
+    n_want, which = (n_bound, "boundary") if n_bound >= n_dense else (n_dense, "dense")
+    what = f"{measure:.0f} {unit} of boundary"
+    if n_want <= n_area:
+        return n_area, "area", (f"{what} need {n_want} sites, fewer than the {n_area} of one "
+                                f"per {per_area}")
+    if n_want <= n_cap:
+        return n_want, which, (f"{what} at one site per {per_bound}" if which == "boundary"
+                               else f"edges {spacing:.1f} px apart on average: sites "
+                               f"{DENSE_SPACING_FRACTION * spacing:.1f} px apart")
+    return n_cap, "boundary_cap", (f"{what} would take {n_want} sites; capped at one per "
+                                   f"{per_cap}")
+
+
 def site_budget(image, pixels_per_site=DEFAULTS.pixels_per_site,
                 boundary_px_per_site=DEFAULTS.boundary_px_per_site,
                 min_pixels_per_site=DEFAULTS.min_pixels_per_site,
@@ -227,24 +244,132 @@ def site_budget(image, pixels_per_site=DEFAULTS.pixels_per_site,
         n_cap = max(n_area, int(round(n_pix / mpps)))
         report.update(boundary_px=round(length, 1), boundary_sites=n_bound,
                       dense_sites=n_dense, cap_sites=n_cap)
-        n_want, which = (n_bound, "boundary") if n_bound >= n_dense else (n_dense, "dense")
-        if n_want <= n_area:
-            n, which = n_area, "area"
-            reason = (f"{length:.0f} px of boundary need {n_want} sites, fewer than the "
-                      f"{n_area} of one per {pps:g} pixels")
-        elif n_want <= n_cap:
-            n = n_want
-            reason = (f"{length:.0f} px of boundary at one site per {bpps:g} px"
-                      if which == "boundary" else
-                      f"edges {spacing:.1f} px apart on average: sites "
-                      f"{DENSE_SPACING_FRACTION * spacing:.1f} px apart")
-        else:
-            n, which = n_cap, "boundary_cap"
-            reason = (f"{length:.0f} px of boundary would take {n_want} sites; capped at one "
-                      f"per {mpps:g} pixels")
+        n, which, reason = _choose(n_area, n_bound, n_dense, n_cap, length, spacing,
+                                   f"{pps:g} pixels", f"{bpps:g} px", f"{mpps:g} pixels", "px")
     if n > n_pix:
         n, which = n_pix, "pixels"
         reason += f"; at most one per pixel ({n_pix})"
     report.update(n_sites=int(n), rule=which, reason=reason,
                   pixels_per_site=round(n_pix / n, 2))
+    return int(n), report
+
+
+AREA_SAMPLE_SLICES = 24
+""":func:`boundary_area` measures at most this many evenly spaced slices per axis."""
+
+
+def boundary_area(volume, density_sigma_px=DEFAULTS.density_sigma_px,
+                  max_slices=AREA_SAMPLE_SLICES):
+    """Area of the gray interfaces of a volume, in voxel faces, by stereology.
+
+    A surface of area S in a volume V cuts planes into boundary lines of L_A = (pi / 4) S / V
+    per unit area, averaged over the planes' orientations (S_V = 4 L_A / pi, Saltykov). L_A is
+    :func:`boundary_length` of evenly spaced slices (at most ``max_slices``) perpendicular
+    to each axis over their area, averaged over the three axes (a surface parallel to one
+    set of slices is seen by the other two).
+
+    Parameters
+    ----------
+    volume : (nz, ny, nx) array_like
+        The gray volume (any units), at least 2 voxels along every axis.
+    density_sigma_px : float, optional
+        Smoothing of each slice before its gradient (:func:`boundary_length`).
+    max_slices : int, optional
+
+    Returns
+    -------
+    area : float
+        Voxel-face units (index space; the spacing is not applied).
+
+    Example
+    -------
+    >>> zz, yy, xx = np.mgrid[:40, :40, :40]
+    >>> ball = ((zz - 20) ** 2 + (yy - 20) ** 2 + (xx - 20) ** 2 < 12 ** 2) * 100.0
+    >>> round(boundary_area(ball) / (4 * np.pi * 12 ** 2), 1)
+    1.1
+    """
+    vol = np.asarray(volume, np.float64)
+    n_vox = vol.size
+    s_v = []
+    for axis in range(3):
+        n = vol.shape[axis]
+        idx = np.unique(np.linspace(0, n - 1, min(n, max_slices)).round().astype(int))
+        lengths = [boundary_length(np.take(vol, k, axis=axis), density_sigma_px)[0] for k in idx]
+        s_v.append(4.0 / np.pi * float(np.mean(lengths)) / (n_vox / n))
+    return float(np.mean(s_v)) * n_vox
+
+
+def site_budget_3d(volume, voxels_per_site=DEFAULTS.voxels_per_site,
+                   min_pixels_per_site=DEFAULTS.min_pixels_per_site,
+                   site_rule=DEFAULTS.site_rule, density_sigma_px=DEFAULTS.density_sigma_px):
+    """Number of CVT sites for a volume in 3D mode: the size rule, or closer sites where
+    the surfaces are closer than its sites.
+
+    With V voxels, A = :func:`boundary_area` and s = V / A, the mean distance between
+    surfaces::
+
+        n_area  = max(64, round(V / voxels_per_site))      sites about s_a = (V / n_area) ** (1/3) apart
+        n_dense = round(V / s ** 3)                       sites s apart, where s < s_a
+        n_cap   = max(n_area, round(V / min_pixels_per_site ** 1.5))
+        n_sites = min(V, n_area if s >= s_a else min(n_dense, n_cap))
+
+    The sites are as far apart as the size rule puts them or as the surfaces are, whichever
+    is closer (continuous: n_dense = n_area at s = s_a), down to the closest spacing the 2D
+    rule allows, sqrt(min_pixels_per_site). A machined part (s of 15-50 voxels) and a
+    dense small part keep n_area: there more, smaller tetrahedra were measured to hurt a
+    low-contrast material (their grays are noisier), unlike 2D, where a boundary gets
+    sites in proportion to its length; a granular or porous volume (snow: s = 3.6) gets
+    its sites a surface spacing apart. ``site_rule='area'``: n_area alone.
+
+    Parameters
+    ----------
+    volume : (nz, ny, nx) array_like
+    voxels_per_site, min_pixels_per_site, site_rule, density_sigma_px
+        As in :mod:`ctseg.params`.
+
+    Returns
+    -------
+    n_sites : int
+    report : dict
+        ``n_sites``, ``rule`` ('area', 'dense', 'boundary_cap', 'voxels'), ``reason``,
+        ``boundary_area_vox2`` (A; None with the area rule), ``surface_spacing_vox`` (s),
+        ``area_sites``, ``dense_sites``, ``cap_sites``, ``voxels_per_site`` (V / n_sites).
+
+    Example
+    -------
+    >>> site_budget_3d(np.zeros((20, 20, 20)))[0]
+    64
+    """
+    vol = np.asarray(volume)
+    vps = check("voxels_per_site", voxels_per_site)
+    mpps = check("min_pixels_per_site", min_pixels_per_site)
+    rule = check("site_rule", site_rule)
+    n_vox = int(vol.size)
+    n_area = max(64, int(round(n_vox / vps)))
+    report = {"area_sites": n_area, "boundary_area_vox2": None, "surface_spacing_vox": None,
+              "dense_sites": None, "cap_sites": None}
+    n, which, reason = n_area, "area", f"one site per {vps:g} voxels (site_rule='area')"
+    if rule != "area":
+        area = boundary_area(vol, density_sigma_px)
+        spacing = n_vox / max(area, 1e-9)
+        s_area = (n_vox / n_area) ** (1.0 / 3.0)
+        n_dense = int(round(min(n_vox / spacing ** 3, 1e15)))
+        n_cap = max(n_area, int(round(n_vox / mpps ** 1.5)))
+        report.update(boundary_area_vox2=round(area, 1), surface_spacing_vox=round(spacing, 2),
+                      dense_sites=n_dense, cap_sites=n_cap)
+        if spacing >= s_area:
+            reason = (f"surfaces {spacing:.1f} voxels apart on average, farther than the "
+                      f"{s_area:.1f} of one site per {vps:g} voxels")
+        elif n_dense <= n_cap:
+            n, which = n_dense, "dense"
+            reason = f"surfaces {spacing:.1f} voxels apart on average: sites that far apart"
+        else:
+            n, which = n_cap, "boundary_cap"
+            reason = (f"surfaces {spacing:.1f} voxels apart would take {n_dense} sites; "
+                      f"capped at one per {mpps ** 1.5:.1f} voxels")
+    if n > n_vox:
+        n, which = n_vox, "voxels"
+        reason += f"; at most one per voxel ({n_vox})"
+    report.update(n_sites=int(n), rule=which, reason=reason,
+                  voxels_per_site=round(n_vox / n, 2))
     return int(n), report

@@ -24,6 +24,7 @@ from .mixed_tetra import relabel_mixed
 from .params import AUTO, DEFAULTS, resolve
 from .pipeline import DENSITY_KEYS
 from .recursive_cut import order_by_gray, segment_triangles
+from .site_budget import site_budget_3d
 from .sites import initial_sites_3d
 from .surfaces import repair_pinched_edges
 from .tetra_gray import VoxelOverlaps
@@ -52,9 +53,17 @@ def _spacing(spacing):
     return check_spacing((1.0, 1.0, 1.0) if spacing is None else spacing)
 
 
-def n_sites_3d(shape, params=None):
-    """The number of CVT sites of a volume of ``shape``: ``n_sites``, or with AUTO
-    :func:`default_n_sites_3d` of ``voxels_per_site``.
+def n_sites_3d(volume, params=None):
+    """The number of CVT sites of a volume: ``n_sites``, or with AUTO
+    :func:`ctseg.site_budget.site_budget_3d` of the gray volume (``site_rule``,
+    ``voxels_per_site``, ``min_pixels_per_site``, ``density_sigma_px``).
+
+    Returns
+    -------
+    n_sites : int
+    report : dict
+        :func:`ctseg.site_budget.site_budget_3d`'s report; ``rule`` 'given' when
+        ``n_sites`` was.
 
     Raises
     ------
@@ -63,17 +72,20 @@ def n_sites_3d(shape, params=None):
 
     Example
     -------
-    >>> n_sites_3d((20, 20, 20), {"voxels_per_site": 100}), n_sites_3d((8, 8, 8), {"n_sites": 70})
-    (80, 70)
+    >>> n_sites_3d(np.zeros((20, 20, 20)), {"voxels_per_site": 100})[0]
+    80
+    >>> n_sites_3d(np.zeros((8, 8, 8)), {"n_sites": 70})[0]
+    70
     """
     p = resolve(params)
-    n_sites = p.n_sites
-    if n_sites == AUTO:
-        n_sites = default_n_sites_3d(shape, p.voxels_per_site)
-    size = int(np.prod([int(s) for s in shape]))
-    if n_sites > size:
-        raise ParameterError(f"n_sites: {n_sites} sites for a volume of {size} voxels")
-    return int(n_sites)
+    vol = np.asarray(volume)
+    if p.n_sites == AUTO:
+        return site_budget_3d(vol, p.voxels_per_site, p.min_pixels_per_site, p.site_rule,
+                              p.density_sigma_px)
+    if p.n_sites > vol.size:
+        raise ParameterError(f"n_sites: {p.n_sites} sites for a volume of {vol.size} voxels")
+    return int(p.n_sites), {"n_sites": int(p.n_sites), "rule": "given",
+                            "reason": "n_sites given"}
 
 
 def density_3d(image, params=None, spacing=None):
@@ -94,7 +106,8 @@ def cvt_sites_3d(rho, params=None, spacing=None, *, n_sites=None, progress=None,
     params, spacing
         As :func:`segment_volume_3d`.
     n_sites : int, optional
-        Default :func:`n_sites_3d` of the volume.
+        Default ``params.n_sites``; needed when that is 'auto' (the count comes from the
+        gray volume, :func:`n_sites_3d`, which the density does not show).
     progress : callable, optional
         ``progress(iteration, max_iter)`` after every Lloyd iteration.
     timed : callable, optional
@@ -109,7 +122,11 @@ def cvt_sites_3d(rho, params=None, spacing=None, *, n_sites=None, progress=None,
     p = resolve(params)
     sp = _spacing(spacing)
     run = timed or _untimed
-    n_sites = n_sites_3d(np.shape(rho), p) if n_sites is None else n_sites
+    if n_sites is None:
+        if p.n_sites == AUTO:
+            raise ParameterError("n_sites: 'auto' needs the gray volume; pass "
+                                 "n_sites=n_sites_3d(volume, params)[0]")
+        n_sites = p.n_sites
     sites0 = run("initial_sites", 0.1, initial_sites_3d, rho, n_sites, sp, init=p.init,
                  seed=p.seed, ward_block_px=p.ward_block_px)
     return run("cvt", 0.2, lloyd_cvt_3d, rho, sites0, sp, tol_px=p.tol_px,

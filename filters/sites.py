@@ -8,7 +8,7 @@ from ctseg.errors import InputError
 from ctseg.params import AUTO
 from ctseg.site_budget import site_budget
 from ctseg.sites import initial_sites
-from ctseg.stages3d import cvt_sites_3d
+from ctseg.stages3d import cvt_sites_3d, n_sites_3d
 
 from .base import CTSegAlgorithm, spec_names
 from .convert import _cells, _field_array, _points, attach_geometry
@@ -75,10 +75,10 @@ class CVTSitesFilter(CTSegAlgorithm):
     :data:`ctseg.cvt3d.SITE_CLASSES`), the exact box coordinates (:data:`BOX_POINTS`)
     and field data ``empty_regions``.
     Parameters (``ctseg params``): NumberOfSites (per slice, or for the whole volume);
-    when it is auto, a slice's count is :func:`ctseg.site_budget.site_budget` of the
-    input image (its gray scalars, as ``segment_image`` counts them: SiteRule,
-    PixelsPerSite, BoundaryPxPerSite, MinPixelsPerSite, DensitySigma) and a volume's
-    follows VoxelsPerSite; Initialization,
+    when it is auto, the count comes from the input image's gray scalars as the composite
+    counts them: :func:`ctseg.site_budget.site_budget` for a slice (SiteRule,
+    PixelsPerSite, BoundaryPxPerSite, MinPixelsPerSite, DensitySigma), ``site_budget_3d``
+    for a volume (SiteRule, VoxelsPerSite, MinPixelsPerSite, DensitySigma); Initialization,
     Seed, WardBlockPixels (the initial sites) and the cvt group (Tolerance,
     MaximumIterations).
     """
@@ -101,7 +101,9 @@ class CVTSitesFilter(CTSegAlgorithm):
         steps = lambda it, n: self.UpdateProgress(0.2 + 0.8 * it / max(n, 1))
         self.UpdateProgress(0.0)
         if rho.ndim == 3:
-            cvt = cvt_sites_3d(np.asarray(rho, np.float64), p, geom.spacing, progress=steps)
+            n_sites = n_sites_3d(arr, p)[0]
+            cvt = cvt_sites_3d(np.asarray(rho, np.float64), p, geom.spacing, n_sites=n_sites,
+                               progress=steps)
             xyz = geom.to_world(cvt.sites / np.asarray(geom.spacing, float))
             box = cvt.sites
         else:
