@@ -105,7 +105,10 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     tetrahedra's), the labelling takes the levels of the tetrahedron grays instead
     (:func:`ctseg.levels3d.checked_levels`; ``diagnostics["levels"]`` says which).
     Tetrahedra straddling a boundary whose voxels mostly vote for other materials are
-    relabelled (:func:`ctseg.mixed_tetra.relabel_mixed`; ``diagnostics["relabelled_mixed"]``).
+    relabelled (:func:`ctseg.mixed_tetra.relabel_mixed`; ``diagnostics["relabelled_mixed"]``),
+    and between two materials of high contrast a tetrahedron whose gray lies clearly beyond
+    the half-way gray takes its neighbour's material (:func:`ctseg.mixed_tetra.relabel_beyond_iso50`;
+    ``diagnostics["relabelled_iso50"]``).
     Pieces of a material touching along an edge only are joined or separated by
     relabelling the tetrahedra around that edge (:func:`ctseg.surfaces.repair_pinched_edges`),
     so every surface is a closed manifold; ``diagnostics["relabelled_for_manifold"]``
@@ -201,6 +204,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "blur_px": labels.blur_px,
         "relabelled_for_manifold": labels.relabelled,
         "relabelled_mixed": labels.mixed_relabelled,
+        "relabelled_iso50": labels.iso50_relabelled,
         "element_quality": quality,
         "slivers_left": int(slivers),
         "streak_weights": streak_weights,

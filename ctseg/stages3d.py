@@ -20,7 +20,7 @@ from .errors import InputError, MeshCheckError, ParameterError
 from .labelling import CUT_KEYS
 from .levels import volume_levels
 from .levels3d import checked_levels
-from .mixed_tetra import relabel_mixed
+from .mixed_tetra import relabel_beyond_iso50, relabel_mixed
 from .params import AUTO, DEFAULTS, resolve
 from .pipeline import DENSITY_KEYS
 from .recursive_cut import order_by_gray, segment_triangles
@@ -203,6 +203,8 @@ class TetraLabels:
     relabelled : int, tetrahedra relabelled for manifold surfaces
     mixed_relabelled : int, mixed tetrahedra relabelled by their voxels
         (:func:`ctseg.mixed_tetra.relabel_mixed`)
+    iso50_relabelled : int, tetrahedra beyond the half-way gray relabelled
+        (:func:`ctseg.mixed_tetra.relabel_beyond_iso50`)
     levels_report : dict, how the levels were chosen (:func:`ctseg.levels3d.checked_levels`)
     """
 
@@ -216,6 +218,7 @@ class TetraLabels:
     relabelled: int
     levels_report: dict
     mixed_relabelled: int
+    iso50_relabelled: int = 0
 
 
 def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=None, timed=None,
@@ -304,6 +307,10 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
                           mesh.points, mesh.tetrahedra, material, levels, sp,
                           mean_255=(gray - offset) * factor, adjacency=mesh.adjacency,
                           overlaps=overlaps)
+    # the voxel noise from the flat voxels' 3 x 3 means (pixel_sigma): differences of
+    # neighbouring voxels would count the edges too, which on a porous volume are many
+    material, beyond = run("iso50_relabel", 0.895, relabel_beyond_iso50, f255, material,
+                           levels, mesh.adjacency, volume_vox, 3.0 * pixel_sigma)
     material, relabelled = run("manifold_repair", 0.9, repair_pinched_edges, mesh, material,
                                volume_vox)
     # materials numbered by level; those no tetrahedron holds are dropped from the count
@@ -313,4 +320,4 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
                        scale=(offset, factor), pixel_sigma=pixel_sigma,
                        graphcut_calls=int(seg.graphcut_calls), blur_px=blur_px,
                        relabelled=int(relabelled), levels_report=levels_report,
-                       mixed_relabelled=int(mixed))
+                       mixed_relabelled=int(mixed), iso50_relabelled=int(beyond))
