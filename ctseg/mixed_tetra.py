@@ -121,8 +121,8 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
 ISO50_MIN_CONTRAST = 10.0
 """:func:`relabel_beyond_iso50` leaves pairs of materials whose levels are closer than this
 many voxel-noise units to the graph cut: there a tetrahedron's offset from the half-way
-gray is as much streak, cupping and correlated noise as partial volume (on the sample
-volume's air and polymer, 6 units apart, the rule cost the polymer 0.08 Dice)."""
+gray is as much streak, cupping and correlated noise as partial volume (README, Method:
+what the gate is worth on the sample volume)."""
 
 ISO50_NOISE_K = 3.0
 """:func:`relabel_beyond_iso50` moves a tetrahedron only when its gray lies this many

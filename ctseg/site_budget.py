@@ -315,11 +315,11 @@ def site_budget_3d(volume, voxels_per_site=DEFAULTS.voxels_per_site,
 
     The sites are as far apart as the size rule puts them or as the surfaces are, whichever
     is closer (continuous: n_dense = n_area at s = s_a), down to the closest spacing the 2D
-    rule allows, sqrt(min_pixels_per_site). A machined part (s of 15-50 voxels) and a
-    dense small part keep n_area: there more, smaller tetrahedra were measured to hurt a
-    low-contrast material (their grays are noisier), unlike 2D, where a boundary gets
-    sites in proportion to its length; a granular or porous volume (snow: s = 3.6) gets
-    its sites a surface spacing apart. ``site_rule='area'``: n_area alone.
+    rule allows, sqrt(min_pixels_per_site). Unlike 2D, a long boundary alone does not add
+    sites: smaller tetrahedra have noisier grays, which costs a low-contrast material more
+    than the finer boundary gains (README, Method); only surfaces closer than the sites
+    do. A machined part keeps n_area; a granular or porous volume gets its sites a surface
+    spacing apart. ``site_rule='area'``: n_area alone.
 
     Parameters
     ----------
