@@ -88,25 +88,6 @@ def test_sample_volume_polymer_gains(monkeypatch):
 
 
 # ------------------------------------------------------------ relabel_beyond_iso50
-def _granular(n=40, seed=1, ss=2):
-    """Packed balls (ice, 1) in air (0), ~57% ice, the truth the majority of 2^3 sub-voxels;
-    blurred 0.9 voxel, noise 5 of a contrast of 100: air gaps of 1-3 voxels."""
-    from scipy import ndimage
-
-    rng = np.random.default_rng(seed)
-    big = n * ss
-    zz, yy, xx = np.mgrid[:big, :big, :big] / ss
-    lab = np.zeros((big,) * 3, bool)
-    for _ in range(3000):
-        c, r = rng.uniform(0, n, 3), rng.uniform(2.5, 4)
-        lab |= (zz - c[0]) ** 2 + (yy - c[1]) ** 2 + (xx - c[2]) ** 2 < r * r
-        if lab.mean() > 0.55:
-            break
-    frac = lab.reshape(n, ss, n, ss, n, ss).mean(axis=(1, 3, 5))
-    vol = ndimage.gaussian_filter(frac * 100.0, 0.9) + rng.normal(0, 5, (n, n, n))
-    return vol, (frac >= 0.5).astype(np.int64)
-
-
 def test_iso50_rule_moves_clear_cases_once_between_adjacent_contrasted_levels():
     from ctseg.mixed_tetra import relabel_beyond_iso50
 
@@ -139,7 +120,10 @@ def test_iso50_rule_reopens_narrow_gaps_of_a_granular_volume(monkeypatch):
     +5 to +7 points); the rule reopens them, and ceasing it loses what it gained."""
     import ctseg.stages3d
 
-    vol, truth = _granular()
+    from ctseg.phantoms_granular3d import make_granular_3d
+
+    g = make_granular_3d(40, seed=1)
+    vol, truth = g.image.astype(np.float64), g.truth.astype(np.int64)
     seg = segment_volume_3d(vol)
     lab = tetra_label_volume(seg.points, seg.tetrahedra, seg.material, vol.shape)
     dice_on = ctseg.metrics.dice_per_label(lab, truth, 2)
