@@ -232,8 +232,9 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
                     merge_rel=DEFAULTS.merge_rel, merge_floor_255=DEFAULTS.merge_floor_255,
                     merge_threshold_255=DEFAULTS.merge_threshold_255,
                     level_min_fraction=DEFAULTS.level_min_fraction, n_materials=DEFAULTS.n_materials,
-                    report=None):
-    """Material gray levels (0-255 scale) seen in one slice or in a stack of slices.
+                    report=None, volume=False):
+    """Material gray levels (0-255 scale) seen in one slice or in a stack of slices
+    (``volume``: consecutive slices, whose low-gradient pixels see the 3D gradient).
 
     The modes of the histogram of the pixels away from edges
     (:func:`pixel_material_levels` on :func:`flat_pixels`). Given a stack, the pixels of
@@ -338,7 +339,7 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
     base = max(merge_floor_255, merge_k * sigma)
     if reason is not None:
         # the clipped voxels are left out: they would make the noise look like zero
-        low = low_gradient_pixels(g255, flat_sigma_px, mask=keep) & keep
+        low = low_gradient_pixels(g255, flat_sigma_px, mask=keep, volume=volume) & keep
         if low.sum() >= 16:
             lv2, sig2 = pixel_material_levels(g255, low, n_materials=n_rest, **kw)
             if reason != "the flat pixels give a single level" or len(lv2) + len(clipped) > 1:
@@ -393,5 +394,6 @@ def volume_levels(volume, params, axis=0):
     stack = np.stack([as_image(volume_slice(volume, ax, k), name=f"slice {k}") for k in sample])
     check_gray_levels(params.gray_levels, stack)
     scale = gray_scale(stack, params.rescale_low_pct, params.rescale_high_pct)
-    levels, sigma = material_levels(stack, scale, **{k: getattr(params, k) for k in LEVEL_KEYS})
+    levels, sigma = material_levels(stack, scale, **{k: getattr(params, k) for k in LEVEL_KEYS},
+                                    volume=len(sample) == n_slices)
     return scale, levels, sigma, sample

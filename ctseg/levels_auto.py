@@ -135,16 +135,16 @@ def tail_levels(g255, levels, separation, mask=None):
     return added
 
 
-def _gradient_gain(sigma_px):
-    """The sd of one component of ``np.gradient`` of an image smoothed by a Gaussian of
-    ``sigma_px``, per unit sd of white noise."""
-    delta = np.zeros((41, 41))
-    delta[20, 20] = 1.0
+def _gradient_gain(sigma_px, ndim=2):
+    """The sd of one component of ``np.gradient`` of an image (``ndim`` 2) or a volume (3)
+    smoothed by a Gaussian of ``sigma_px``, per unit sd of white noise."""
+    delta = np.zeros((41,) * ndim)
+    delta[(20,) * ndim] = 1.0
     kernel = gaussian_filter(delta, sigma_px) if sigma_px > 0 else delta
     return float(np.sqrt(np.sum(np.gradient(kernel, axis=0) ** 2)))
 
 
-def low_gradient_pixels(image255, flat_sigma_px=DEFAULTS.flat_sigma_px, mask=None):
+def low_gradient_pixels(image255, flat_sigma_px=DEFAULTS.flat_sigma_px, mask=None, volume=False):
     """Pixels inside flat regions told by the noise, not by the density map.
 
     Per slice: the gradient magnitude of the image smoothed by ``flat_sigma_px`` is below
@@ -160,6 +160,11 @@ def low_gradient_pixels(image255, flat_sigma_px=DEFAULTS.flat_sigma_px, mask=Non
     flat_sigma_px : float
     mask : bool array_like, the shape of ``image255``, optional
         The pixels that measure the noise and the percentile (e.g. all but clipped ones).
+    volume : bool, optional
+        The stack is consecutive slices of a volume: smooth and take the gradient in 3D
+        (a partial-volume voxel on a surface nearly parallel to the slices has no in-plane
+        gradient), with the gain of the 3D filter; noise and percentile as before. Where
+        that leaves fewer than 16 pixels (surfaces everywhere), the slices' own gradients.
 
     Returns
     -------
@@ -175,20 +180,29 @@ def low_gradient_pixels(image255, flat_sigma_px=DEFAULTS.flat_sigma_px, mask=Non
     stack = np.asarray(image255, float)
     stack = stack[None] if stack.ndim == 2 else stack
     sel = np.ones(stack.shape, bool) if mask is None else np.asarray(mask, bool).reshape(stack.shape)
-    gain = _gradient_gain(flat_sigma_px)
+    volume = bool(volume) and stack.shape[0] >= 3
+    gain = _gradient_gain(flat_sigma_px, 3 if volume else 2)
+    if volume:
+        sm3 = gaussian_filter(stack, flat_sigma_px, mode="nearest") if flat_sigma_px > 0 else stack
+        mag3 = np.sqrt(sum(g * g for g in np.gradient(sm3)))
     out = np.zeros(stack.shape, bool)
     for k, sl in enumerate(stack):
         if not sel[k].any():
             continue
-        sm = gaussian_filter(sl, flat_sigma_px, mode="nearest") if flat_sigma_px > 0 else sl
-        gy, gx = np.gradient(sm)
-        mag = np.hypot(gx, gy)
+        if volume:
+            mag = mag3[k]
+        else:
+            sm = gaussian_filter(sl, flat_sigma_px, mode="nearest") if flat_sigma_px > 0 else sl
+            gy, gx = np.gradient(sm)
+            mag = np.hypot(gx, gy)
         m = sel[k]
         d = np.concatenate([(sl[1:] - sl[:-1])[m[1:] & m[:-1]], (sl[:, 1:] - sl[:, :-1])[m[:, 1:] & m[:, :-1]]])
         noise = 1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0) if len(d) else 0.0
         thr = max(LOW_GRADIENT_NOISE_MULT * gain * noise,
                   float(np.percentile(mag[m], LOW_GRADIENT_MIN_PCT)))
         out[k] = binary_erosion(mag <= thr, np.ones((3, 3), bool), border_value=1)
+    if volume and out.sum() < 16:  # edges everywhere in 3D: the slices' own gradients
+        return low_gradient_pixels(image255, flat_sigma_px, mask)
     return out.reshape(np.shape(image255))
 
 

@@ -167,3 +167,22 @@ def test_report_in_segment_image_diagnostics():
     assert rep["k_chosen"] == 2 and rep["k_candidates"][1]["k"] == 2
     assert rep["k_candidates"][1]["min_gap_over_separation"] >= 1.0
     assert {"criterion", "reason", "flat_fraction", "low_gradient_fraction"} <= set(rep)
+
+
+def test_a_volume_s_low_gradient_voxels_see_the_3d_gradient():
+    """Packed balls in 3D: every voxel counts as flat, so the levels come from the
+    low-gradient voxels. Found slice by slice, the voxels on a ball's cap (no in-plane
+    gradient) make a false middle level; with the 3D gradient (volume_levels of a whole
+    volume) the two phases alone remain, near their true grays."""
+    from ctseg.levels import volume_levels
+    from ctseg.params import resolve
+    from ctseg.phantoms_granular3d import make_granular_3d
+
+    vol = make_granular_3d(48, seed=0).image.astype(float)
+    scale, levels, _, sample = volume_levels(vol, resolve(None))
+    assert len(sample) == vol.shape[0] and len(levels) == 2
+    true_255 = (np.array([0.0, 1.0]) - scale[0]) * scale[1]
+    assert np.all(np.abs(levels - true_255) < 25.0)
+    report = {}
+    per_slice, _ = material_levels(vol, scale, report=report)  # volume=False
+    assert report["method"] == "low_gradient" and len(per_slice) == 3
