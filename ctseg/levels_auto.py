@@ -124,8 +124,7 @@ def tail_levels(g255, levels, separation, mask=None):
     [7.7]
     """
     g = np.asarray(g255, float)
-    sm = uniform_filter(g, (1,) * (g.ndim - 2) + (3, 3), mode="nearest")
-    v = sm.ravel() if mask is None else sm[np.asarray(mask, bool)]
+    v = level_sample(g, None if mask is None else np.asarray(mask, bool), n_max=g.size)
     lo, hi = float(levels[0]), float(levels[-1])
     added = []
     for beyond, pct in ((v < lo - separation(lo), TAIL_LEVEL_PCT),

@@ -124,21 +124,16 @@ def boundary_length(image, density_sigma_px=DEFAULTS.density_sigma_px):
     return float(edges.sum() / MEAN_RIDGE_DENSITY), edges
 
 
-def _choose(n_area, n_bound, n_dense, n_cap, measure, spacing, per_area, per_bound, per_cap,
-            unit):
-    """The boundary rule's choice among its terms (:func:`site_budget`): the larger of
-    n_boundary and n_dense, at least n_area, at most n_cap; which term decided and why."""
-    n_want, which = (n_bound, "boundary") if n_bound >= n_dense else (n_dense, "dense")
-    what = f"{measure:.0f} {unit} of boundary"
-    if n_want <= n_area:
-        return n_area, "area", (f"{what} need {n_want} sites, fewer than the {n_area} of one "
-                                f"per {per_area}")
-    if n_want <= n_cap:
-        return n_want, which, (f"{what} at one site per {per_bound}" if which == "boundary"
-                               else f"edges {spacing:.1f} px apart on average: sites "
-                               f"{DENSE_SPACING_FRACTION * spacing:.1f} px apart")
-    return n_cap, "boundary_cap", (f"{what} would take {n_want} sites; capped at one per "
-                                   f"{per_cap}")
+def _at_most_one_per_element(n, n_elements, which, reason, report, element):
+    """The last step of both budgets: at most one site per pixel (``element`` 'pixel') or
+    voxel; the report completed with ``n_sites``, ``rule``, ``reason`` and
+    ``pixels_per_site`` (or ``voxels_per_site``)."""
+    if n > n_elements:
+        n, which = n_elements, element + "s"
+        reason += f"; at most one per {element} ({n_elements})"
+    report.update(n_sites=int(n), rule=which, reason=reason,
+                  **{f"{element}s_per_site": round(n_elements / n, 2)})
+    return int(n), report
 
 
 def site_budget(image, pixels_per_site=DEFAULTS.pixels_per_site,
@@ -244,14 +239,22 @@ def site_budget(image, pixels_per_site=DEFAULTS.pixels_per_site,
         n_cap = max(n_area, int(round(n_pix / mpps)))
         report.update(boundary_px=round(length, 1), boundary_sites=n_bound,
                       dense_sites=n_dense, cap_sites=n_cap)
-        n, which, reason = _choose(n_area, n_bound, n_dense, n_cap, length, spacing,
-                                   f"{pps:g} pixels", f"{bpps:g} px", f"{mpps:g} pixels", "px")
-    if n > n_pix:
-        n, which = n_pix, "pixels"
-        reason += f"; at most one per pixel ({n_pix})"
-    report.update(n_sites=int(n), rule=which, reason=reason,
-                  pixels_per_site=round(n_pix / n, 2))
-    return int(n), report
+        n_want, which = (n_bound, "boundary") if n_bound >= n_dense else (n_dense, "dense")
+        if n_want <= n_area:
+            n, which = n_area, "area"
+            reason = (f"{length:.0f} px of boundary need {n_want} sites, fewer than the "
+                      f"{n_area} of one per {pps:g} pixels")
+        elif n_want <= n_cap:
+            n = n_want
+            reason = (f"{length:.0f} px of boundary at one site per {bpps:g} px"
+                      if which == "boundary" else
+                      f"edges {spacing:.1f} px apart on average: sites "
+                      f"{DENSE_SPACING_FRACTION * spacing:.1f} px apart")
+        else:
+            n, which = n_cap, "boundary_cap"
+            reason = (f"{length:.0f} px of boundary would take {n_want} sites; capped at one "
+                      f"per {mpps:g} pixels")
+    return _at_most_one_per_element(n, n_pix, which, reason, report, "pixel")
 
 
 AREA_SAMPLE_SLICES = 24
@@ -367,9 +370,4 @@ def site_budget_3d(volume, voxels_per_site=DEFAULTS.voxels_per_site,
             n, which = n_cap, "boundary_cap"
             reason = (f"surfaces {spacing:.1f} voxels apart would take {n_dense} sites; "
                       f"capped at one per {mpps ** 1.5:.1f} voxels")
-    if n > n_vox:
-        n, which = n_vox, "voxels"
-        reason += f"; at most one per voxel ({n_vox})"
-    report.update(n_sites=int(n), rule=which, reason=reason,
-                  voxels_per_site=round(n_vox / n, 2))
-    return int(n), report
+    return _at_most_one_per_element(n, n_vox, which, reason, report, "voxel")
