@@ -11,7 +11,7 @@ memory. The bounds are rounded outwards when stored (u up, l2 and l3 down: :func
 :func:`_down`), so they stay bounds and the labels stay exact.
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ._cvt import _block_margin
 
@@ -143,13 +143,14 @@ def _three_nearest_3d(x, y, z, sites, h, gx, gy, gz, start, items):
     return i1, np.sqrt(b1), i2, np.sqrt(b2), np.sqrt(b3)
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _assign_3d(nz, ny, nx, sx, sy, sz, sites, labels, second, u, l2, l3):
     """Exact nearest site (labels, distance u), second nearest (second, distance l2) and
-    third-nearest distance (l3) of every voxel centre."""
+    third-nearest distance (l3) of every voxel centre (slices in parallel: each voxel's
+    result is its own, so the thread count changes nothing)."""
     h, gx, gy, gz, start, items = _site_grid_3d(sites, (nx - 1) * sx, (ny - 1) * sy,
                                                 (nz - 1) * sz)
-    for k in range(nz):
+    for k in prange(nz):
         for j in range(ny):
             for i in range(nx):
                 v = (k * ny + j) * nx + i
@@ -219,7 +220,7 @@ def _reach_margin_3d(size, s, h, g, reach):
     return out, cell
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _reassign_3d(nz, ny, nx, sx, sy, sz, old_sites, sites, drift, labels, second, u, l2, l3):
     """Bounds after the sites moved by `drift`: re-find only voxels whose bounds fail.
 
@@ -235,7 +236,8 @@ def _reassign_3d(nz, ny, nx, sx, sy, sz, old_sites, sites, drift, labels, second
     nearer than l3 it is the nearest (the two may swap: a voxel near the bisector of its
     two nearest sites needs no search); else the voxel is searched again. Equality
     counts as a failed bound, so that an exact tie always goes to the lower site index,
-    as a search would give it. Returns the number of voxels searched.
+    as a search would give it. Slices run in parallel (a voxel's update reads and writes
+    only its own state). Returns the number of voxels searched.
     """
     h, gx, gy, gz, start, items = _site_grid_3d(sites, (nx - 1) * sx, (ny - 1) * sy,
                                                 (nz - 1) * sz)
@@ -249,7 +251,7 @@ def _reassign_3d(nz, ny, nx, sx, sy, sz, old_sites, sites, drift, labels, second
     my2 = _reach_margin_3d(ny, sy, h, gy, _REACH2)[0]
     mz2 = _reach_margin_3d(nz, sz, h, gz, _REACH2)[0]
     searched = 0
-    for k in range(nz):
+    for k in prange(nz):
         z = k * sz
         for j in range(ny):
             y = j * sy

@@ -4,7 +4,8 @@ import numbers
 
 import numpy as np
 
-from ._tet_clip import _column_sums, _overlaps, _record, _row_sums
+from ._overlap_rows import overlap_rows
+from ._tet_clip import _column_sums, _overlaps, _row_sums
 from ._validate import as_volume, check_spacing
 from .errors import InputError, ParameterError
 
@@ -316,26 +317,10 @@ class VoxelOverlaps:
     def __init__(self, points, tetrahedra, shape, spacing=(1.0, 1.0, 1.0)):
         dims = _check_shape(shape)
         P = _corners(points, tetrahedra, dims, spacing)
-        m = len(P)
         self.shape = dims
-        self.start = np.zeros(m + 1, np.int64)
-        itype = np.int32 if int(np.prod(dims)) < 2 ** 31 else np.int64
-        # the expected count fills the buffers nearly exactly: rarely a second call
-        cap = int(1.02 * _expected_cells(P).sum()) + 1024 if m else 0
-        voxel, overlap = np.empty(cap, itype), np.empty(cap)
-        t = 0
-        while True:
-            t = _record(P, *dims, t, self.start, voxel, overlap)
-            if t < 0:
-                _outgrew(-1 - t)
-            if t == m:
-                break
-            cap = int(1.25 * cap) + 4096
-            voxel, overlap = _grown(voxel, self.start[t], cap), _grown(overlap, self.start[t], cap)
-        q = int(self.start[m])
-        # trimmed copies: the spare capacity goes back
-        self.voxel = voxel[:q].copy() if q < cap else voxel
-        self.overlap = overlap[:q].copy() if q < cap else overlap
+        self.start, self.voxel, self.overlap = overlap_rows(P, dims, _expected_cells(P))
+        if self.voxel is None:
+            _outgrew(-1 - self.start)
         self.tet_volume = _row_sums(self.start, self.voxel, self.overlap, np.zeros(0))[0]
 
     @property
@@ -388,9 +373,3 @@ class VoxelOverlaps:
                                          np.ascontiguousarray(vals), int(np.prod(self.shape)))
         mean = np.divide(weighted, covered, out=np.zeros_like(weighted), where=covered > 0)
         return mean.reshape(self.shape), covered.reshape(self.shape)
-
-
-def _grown(a, keep, size):
-    out = np.empty(size, a.dtype)
-    out[:keep] = a[:keep]
-    return out

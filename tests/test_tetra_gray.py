@@ -360,3 +360,36 @@ def test_bad_input_of_the_transpose_is_refused():
         voxel_overlaps(pts, [[0, 1, 2, 3]], (3, 3))
     with pytest.raises(ParameterError, match="shape"):
         voxel_overlaps(pts, [[0, 1, 2, 3]], (3, 3.0, 3))
+
+
+@pytest.mark.parametrize("chunk, slack, redone", [(7, 1.0, False), (40, 0.0, True),
+                                                  (10 ** 6, 0.0, True)])
+def test_overlap_rows_do_not_depend_on_the_chunks_or_their_buffers(monkeypatch, chunk, slack,
+                                                                   redone):
+    """The parallel recorder packs chunks of tetrahedra; a chunk that overflows its
+    stretch is done again alone. The rows stay those of one
+    sequential pass of the kernel, and sum to the streaming kernel's grays."""
+    from ctseg import _overlap_rows
+    from ctseg._tet_clip import _record
+    from ctseg.tetra_gray import VoxelOverlaps
+
+    shape = (6, 7, 9)
+    pts, tets = random_mesh(shape, 60, 5)
+    volume = np.random.default_rng(1).normal(size=shape)
+    ref = VoxelOverlaps(pts, tets, shape)
+    P = np.ascontiguousarray(pts[tets])
+    start = np.zeros(len(P) + 1, np.int64)
+    voxel, overlap = np.empty(10 ** 6, np.int32), np.empty(10 ** 6)
+    assert _record(P, *shape, 0, start, voxel, overlap) == len(P)
+    expected = np.full(len(P), slack * 30.0)
+    monkeypatch.setattr(_overlap_rows, "_CHUNK_TETS", chunk)
+    calls = []
+    growing = _overlap_rows._record_growing
+    monkeypatch.setattr(_overlap_rows, "_record_growing", lambda *a: calls.append(1) or growing(*a))
+    got_start, got_voxel, got_overlap = _overlap_rows.overlap_rows(P, shape, expected)
+    q = start[-1]
+    for a, b in ((got_start, start), (got_voxel, voxel[:q]), (got_overlap, overlap[:q]),
+                 (ref.start, start), (ref.voxel, voxel[:q])):
+        np.testing.assert_array_equal(a, b)
+    assert np.array_equal(ref.tetra_mean(volume), tetra_gray(volume, pts, tets))
+    assert bool(calls) == redone
