@@ -316,7 +316,7 @@ def plots(res, folder):
     files = []
     if "stages" in res:
         fig, ax = plt.subplots(figsize=(8, 3.2))
-        names = list(res["stages"][0]["stages_s"]) + ["write"]
+        names = list(dict.fromkeys(s for r in res["stages"] for s in r["stages_s"])) + ["write"]
         colours = dict(zip(names, plt.get_cmap("tab20").colors))
         for i, r in enumerate(res["stages"]):
             left = 0.0

@@ -4,13 +4,20 @@ grid, the pixel assignment with Hamerly's bounds, and the per-region sums.
 Private: :func:`ctseg.lloyd_cvt` is the entry point.
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 # Profiling showed Lloyd's per-iteration pixel passes (bound updates, KD-tree re-queries,
 # region sums) at 3.0 of 5.0 s for 512 x 512 / 1000 sites in numpy; one fused pass per
 # iteration does the same work exactly.
 
 _REACH = 2  # cells: sites farther than this cannot come near a pixel within one iteration
+_ROWS = 16  # rows per block of the parallel kernels: many blocks per thread even out the load
+
+parallel = True
+"""Whether :mod:`ctseg.cvt` runs the ``_parallel`` kernels (numba threads). A worker
+process forked for slices turns this off: the OpenMP runtime numba may use is not fork
+safe (a parallel kernel in a child of a process that ran one aborts the child), and a
+worker per core leaves no core for threads anyway."""
 
 
 @njit(cache=True)
@@ -100,15 +107,31 @@ def _two_nearest(x, y, sites, h, gx, gy, start, items):
 
 
 @njit(cache=True)
-def _assign(rows, cols, sites, labels, u, l):
-    """Exact nearest (labels, u) and second-nearest distance (l) of every pixel centre."""
-    h, gx, gy, start, items = _site_grid(sites, cols - 1.0, rows - 1.0)
-    for i in range(rows * cols):
+def _assign_rows(y0, y1, cols, sites, h, gx, gy, start, items, labels, u, l):
+    """Exact nearest (labels, u) and second-nearest distance (l) of the pixel centres of
+    rows y0 <= y < y1."""
+    for i in range(y0 * cols, y1 * cols):
         y, x = divmod(i, cols)
         i1, d1, _, d2 = _two_nearest(float(x), float(y), sites, h, gx, gy, start, items)
         labels[i] = i1
         u[i] = d1
         l[i] = d2
+
+
+@njit(cache=True)
+def _assign(rows, cols, sites, labels, u, l):
+    """:func:`_assign_rows` of every row."""
+    h, gx, gy, start, items = _site_grid(sites, cols - 1.0, rows - 1.0)
+    _assign_rows(0, rows, cols, sites, h, gx, gy, start, items, labels, u, l)
+
+
+@njit(cache=True, parallel=True)
+def _assign_parallel(rows, cols, sites, labels, u, l):
+    """:func:`_assign`, blocks of rows in parallel (each pixel's result is its own)."""
+    h, gx, gy, start, items = _site_grid(sites, cols - 1.0, rows - 1.0)
+    for b in prange((rows + _ROWS - 1) // _ROWS):
+        _assign_rows(b * _ROWS, min((b + 1) * _ROWS, rows), cols, sites, h, gx, gy, start,
+                     items, labels, u, l)
 
 
 @njit(cache=True)
@@ -191,8 +214,23 @@ def _reach_margin(size, h, g, reach):
 
 
 @njit(cache=True)
-def _reassign(rows, cols, old_sites, sites, drift, labels, u, l):
-    """Hamerly's step after the sites moved by `drift`: re-find only pixels whose bounds fail.
+def _reassign_setup(rows, cols, old_sites, sites, drift):
+    """The site grid, the local drift bounds and the block margins :func:`_reassign_rows`
+    reads."""
+    h, gx, gy, start, items = _site_grid(sites, cols - 1.0, rows - 1.0)
+    b1, b1_site, b2 = _local_drift(old_sites, drift, h, gx, gy, _REACH)
+    mx = _reach_margin(cols, h, gx, _REACH)
+    my = _reach_margin(rows, h, gy, _REACH)
+    cell_x = np.empty(cols, np.int64)
+    for x in range(cols):
+        cell_x[x] = min(int(x / h), gx - 1)
+    return h, gx, gy, start, items, b1, b1_site, b2, drift.max(), mx, my, cell_x
+
+
+@njit(cache=True)
+def _reassign_rows(y0, y1, cols, sites, drift, labels, u, l, setup):
+    """Hamerly's step after the sites moved by `drift`, on rows y0 <= y < y1: re-find
+    only pixels whose bounds fail.
 
     u >= distance to the own site, l <= distance to any other site. A site that started
     within _REACH grid cells of the pixel's cell came at most the largest drift among
@@ -201,16 +239,9 @@ def _reassign(rows, cols, old_sites, sites, drift, labels, u, l):
     sites stop moving long before the last ones, so these local bounds fail far less
     often than Hamerly's global one. Returns the number of pixels searched.
     """
-    h, gx, gy, start, items = _site_grid(sites, cols - 1.0, rows - 1.0)
-    b1, b1_site, b2 = _local_drift(old_sites, drift, h, gx, gy, _REACH)
-    far = drift.max()
-    mx = _reach_margin(cols, h, gx, _REACH)
-    my = _reach_margin(rows, h, gy, _REACH)
-    cell_x = np.empty(cols, np.int64)
-    for x in range(cols):
-        cell_x[x] = min(int(x / h), gx - 1)
+    h, gx, gy, start, items, b1, b1_site, b2, far, mx, my, cell_x = setup
     searched = 0
-    for y in range(rows):
+    for y in range(y0, y1):
         row_cell = min(int(y / h), gy - 1) * gx
         for x in range(cols):
             i = y * cols + x
@@ -231,4 +262,23 @@ def _reassign(rows, cols, old_sites, sites, drift, labels, u, l):
                     searched += 1
             u[i] = ui
             l[i] = li
+    return searched
+
+
+@njit(cache=True)
+def _reassign(rows, cols, old_sites, sites, drift, labels, u, l):
+    """:func:`_reassign_rows` of every row."""
+    setup = _reassign_setup(rows, cols, old_sites, sites, drift)
+    return _reassign_rows(0, rows, cols, sites, drift, labels, u, l, setup)
+
+
+@njit(cache=True, parallel=True)
+def _reassign_parallel(rows, cols, old_sites, sites, drift, labels, u, l):
+    """:func:`_reassign`, blocks of rows in parallel (a pixel's update reads and writes
+    only its own state)."""
+    setup = _reassign_setup(rows, cols, old_sites, sites, drift)
+    searched = 0
+    for b in prange((rows + _ROWS - 1) // _ROWS):
+        searched += _reassign_rows(b * _ROWS, min((b + 1) * _ROWS, rows), cols, sites, drift,
+                                   labels, u, l, setup)
     return searched

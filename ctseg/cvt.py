@@ -4,7 +4,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ._cvt import _assign, _reassign, _region_sums
+from . import _cvt
+from ._cvt import _region_sums
 from .errors import InputError, ParameterError
 from .params import DEFAULTS, check
 
@@ -147,6 +148,7 @@ def lloyd_cvt(rho, sites, tol_px=DEFAULTS.tol_px, max_iter=DEFAULTS.max_iter, pr
     w = np.ascontiguousarray(rho.ravel())
     sites, corner_sites = _pin_corners(sites, rho.shape)
     sites = np.ascontiguousarray(sites)
+    _assign, _reassign = _kernels()
 
     # Border lines (corners excluded: rule 1 owns them): pixel indices, their weights and
     # weighted coordinates, the axis held fixed and its value
@@ -273,12 +275,20 @@ def lloyd_cvt(rho, sites, tol_px=DEFAULTS.tol_px, max_iter=DEFAULTS.max_iter, pr
         if move < tol_px:
             converged = True
             break
-    sites, labels = _drop_coincident(sites, labels, constraint, rows, cols, u, l)
+    sites, labels = _drop_coincident(sites, labels, constraint, rows, cols, u, l, _assign)
     return CVTResult(sites=sites, labels=labels.reshape(rows, cols), energy=energy,
                      n_iter=it, converged=converged, empty_regions=empty_total)
 
 
-def _drop_coincident(sites, labels, constraint, rows, cols, u, l):
+def _kernels():
+    """The pixel assignment and the bound update: threaded unless :data:`ctseg._cvt.parallel`
+    is off (a slice worker); both give the same result."""
+    if _cvt.parallel:
+        return _cvt._assign_parallel, _cvt._reassign_parallel
+    return _cvt._assign, _cvt._reassign
+
+
+def _drop_coincident(sites, labels, constraint, rows, cols, u, l, _assign):
     """Remove free sites within :data:`_COINCIDENT_PX` of another site, then re-find the
     regions.
 

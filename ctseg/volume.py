@@ -65,7 +65,7 @@ def _run_local(tasks, n_jobs, on_done):
     # ParaView or Slicer is the application itself, and re-run the caller's __main__
     method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
     pool = ProcessPoolExecutor(max_workers=n_jobs, mp_context=multiprocessing.get_context(method),
-                               initializer=_ignore_sigint)
+                               initializer=_worker_init)
     futures = {pool.submit(_segment_slice, *task): k for k, task in tasks.items()}
     try:
         for fut in as_completed(futures):
@@ -78,12 +78,16 @@ def _run_local(tasks, n_jobs, on_done):
     pool.shutdown()
 
 
-def _ignore_sigint():
+def _worker_init():
     """Workers leave Ctrl-C to the parent, which stops the run and reports once (a
-    terminal sends SIGINT to the whole process group)."""
+    terminal sends SIGINT to the whole process group), and run the serial kernels
+    (:data:`ctseg._cvt.parallel`: a forked child must not start numba's threads)."""
     import signal
 
+    from . import _cvt
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _cvt.parallel = False
 
 
 def _run_dask(tasks, client, on_done):
