@@ -407,15 +407,17 @@ def fmt_dice(d):
 def markdown(res):
     out = [f"# ctseg benchmarks ({res['when']}, {res['machine']})", ""]
     if "stages" in res:
+        names = list(dict.fromkeys(s for r in res["stages"] for s in r["stages_s"]))
         out += ["## Stage timings at the paper's sizes (median of "
                 f"{res['stages'][0]['repeats']}; end to end = segment + write .vtp)", "",
-                "| size / sites | end to end s | " + " | ".join(res["stages"][0]["stages_s"])
+                "| size / sites | end to end s | " + " | ".join(names)
                 + " | write | Lloyd it. | triangles | peak MiB | Dice | boundary px |",
-                "|---" * (len(res["stages"][0]["stages_s"]) + 8) + "|"]
+                "|---" * (len(names) + 8) + "|"]
         for r in res["stages"]:
             default = " (default)" if r.get("default_sites") else ""
             out.append(f"| {r['size']} / {r['n_sites']}{default} | **{r['end_to_end_s']:.3f}** | "
-                       + " | ".join(f"{v:.3f}" for v in r["stages_s"].values())
+                       + " | ".join(f"{r['stages_s'][s]:.3f}" if s in r["stages_s"] else "-"
+                                    for s in names)
                        + f" | {r['write_s']:.3f} | {r['lloyd_iterations']} | {r['n_triangles']} | "
                        f"{r['peak_mib']:.0f} | {fmt_dice(r['dice'])} | {r['boundary_px']:.2f} |")
         out.append("")
