@@ -25,8 +25,10 @@ class MeshLabels:
     """Outcome of :func:`label_mesh`: ``material`` per triangle, ``material_gray`` (input
     units), the ``levels_255`` used, the pixel noise ``pixel_sigma`` (0-255 scale; 0 when
     the levels were given), the raw :class:`ctseg.recursive_cut.MaterialSegmentation`, the
-    fitted blur ``blur_px`` (None without blur correction) and ``times_s``, the seconds
-    spent in the blur correction ('blur_correction'; the graph cuts are the rest)."""
+    fitted blur ``blur_px`` (None without blur correction), ``times_s``, the seconds
+    spent in the blur correction ('blur_correction'; the graph cuts are the rest), and
+    ``levels_report``, :func:`ctseg.levels.material_levels`'s evidence for the levels it
+    found (empty when ``levels_255`` was given)."""
 
     material: np.ndarray
     material_gray: np.ndarray
@@ -35,6 +37,7 @@ class MeshLabels:
     segmentation: object
     blur_px: object = None
     times_s: dict = field(default_factory=dict)
+    levels_report: dict = field(default_factory=dict)
 
 
 def label_mesh(image, mesh, gray, params=None, *, scale=None, levels_255=None, **overrides):
@@ -103,10 +106,11 @@ def label_mesh(image, mesh, gray, params=None, *, scale=None, levels_255=None, *
         d = mesh.points[mesh.shared_edges[:, 0]] - mesh.points[mesh.shared_edges[:, 1]]
         edge_len = np.hypot(d[:, 0], d[:, 1])
     pixel_sigma = 0.0
+    levels_report = {}
     if levels_255 is None and p.gray_levels != AUTO:
         # the user's levels: numbered by level as well, so material k is the k-th level
         levels_255, pixel_sigma = material_levels(
-            img, scale, **{k: getattr(p, k) for k in LEVEL_KEYS})
+            img, scale, report=levels_report, **{k: getattr(p, k) for k in LEVEL_KEYS})
     fixed = levels_255 is not None
     if fixed:
         levels = np.sort(np.asarray(levels_255, float).ravel())
@@ -116,7 +120,7 @@ def label_mesh(image, mesh, gray, params=None, *, scale=None, levels_255=None, *
             raise ParameterError(f"levels_255: {len(levels)} levels given for n_materials={n_materials}")
     else:
         levels, pixel_sigma = material_levels(
-            img, scale, **{k: getattr(p, k) for k in LEVEL_KEYS})
+            img, scale, report=levels_report, **{k: getattr(p, k) for k in LEVEL_KEYS})
     cut = dict({k: getattr(p, k) for k in CUT_KEYS}, edge_length=edge_len)
     seg = segment_triangles(f255, area, mesh.adjacency, cent, levels=levels, **cut)
     times = {}
@@ -141,4 +145,4 @@ def label_mesh(image, mesh, gray, params=None, *, scale=None, levels_255=None, *
     return MeshLabels(material=material.astype(np.int64), material_gray=np.asarray(mat_gray, float),
                       levels_255=seg.mode_gray if not fixed else levels,
                       pixel_sigma=float(pixel_sigma), segmentation=seg, blur_px=blur_px,
-                      times_s=times)
+                      times_s=times, levels_report=levels_report)

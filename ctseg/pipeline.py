@@ -13,7 +13,6 @@ from .density import density_map
 from .errors import ParameterError
 from .intensity import estimate_noise, rescale_gray
 from .labelling import label_mesh
-from .levels import LEVEL_KEYS, material_levels
 from .levels_given import check_gray_levels
 from .params import AUTO, DEFAULTS, resolve
 from .resources import check_memory, slice_bytes
@@ -236,9 +235,8 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
                            mesh.adjacency, material)
     report(1.0, "done")
     seg = labels.segmentation
-    if levels_255 is None:  # how the levels were found (label_mesh found them the same way)
-        level_report = {}
-        material_levels(img, scale, report=level_report, **{k: getattr(p, k) for k in LEVEL_KEYS})
+    if levels_255 is None:  # how label_mesh found the levels
+        level_report = labels.levels_report
     else:
         level_report = {"method": "given", "levels_255": [float(v) for v in levels_255]}
     diagnostics = {
