@@ -110,7 +110,7 @@ class TetraParams(_Group):
                                             "are moved a little and the sites "
                                             "triangulated again", "deg", low=0.0, high=30.0,
                                             vtk="SliverMinDihedral")
-    sliver_rounds: int = _param(12, "int", "rounds of sliver perturbation (0 = none)",
+    sliver_rounds: int = _param(40, "int", "rounds of sliver perturbation (0 = none)",
                                 low=0, high=1000)
 
 
