@@ -41,15 +41,19 @@ suite() {  # suite NAME COMMAND...: run it; add up the 'N passed, M failed' it e
     fi
     echo "== $name: $((SECONDS - start)) s"
 }
-# one Xvfb for all (-displayfd: a free display, no race with other X servers on the machine)
-Xvfb -displayfd 3 -screen 0 1600x1000x24 -nolisten tcp 3>"$log.display" 2>/dev/null &
+# one Xvfb for all (-displayfd: a free display, no race with other X servers on the machine;
+# -noreset: by default the server resets whenever its last client leaves, and a client that
+# connects meanwhile gets no connection, "bad X server connection" and an abort in
+# vtkXOpenGLRenderWindow::CreateAWindow: 3 of 60 short pvpython renders under a 2-thread
+# load here, 0 of 30 with -noreset, and the cause of the two CI aborts of the slices suite)
+Xvfb -displayfd 3 -screen 0 1600x1000x24 -nolisten tcp -noreset 3>"$log.display" 2>/dev/null &
 xvfb=$!
 trap 'kill "$xvfb" 2>/dev/null || true' EXIT
 for _ in $(seq 100); do [ -s "$log.display" ] && break; sleep 0.1; done
 export DISPLAY=":$(cat "$log.display")"
-# a fresh Xvfb has once aborted the first render window in CI (vtkXOpenGLRenderWindow::
-# CreateAWindow, before any ctseg code ran): open one plain window first, up to 3 tries, so
-# that a fault of the X setup is not reported as a failing suite
+# the first render window on the fresh server has failed in CI as well: open one plain
+# window first, up to 3 tries, so that a fault of the X setup is not reported as a failing
+# suite
 for try in 1 2 3; do
     timeout -k 5 60 pvpython -c 'from paraview.simple import CreateRenderView, Render; Render(CreateRenderView())' \
         >/dev/null 2>&1 && break

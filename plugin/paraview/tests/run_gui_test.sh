@@ -7,7 +7,7 @@
 # Usage: plugin/paraview/tests/run_gui_test.sh PYTHONPATH CAPTURE.png
 set -euo pipefail
 if [ -z "${DISPLAY:-}" ]; then
-    exec xvfb-run -a -s "-screen 0 1600x1000x24" "$0" "$@"
+    exec xvfb-run -a -s "-screen 0 1600x1000x24 -noreset" "$0" "$@"
 fi
 cd "$(dirname "$0")/../../.."
 pythonpath=$1
