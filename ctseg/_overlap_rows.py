@@ -76,24 +76,21 @@ def overlap_rows(P, dims, expected):
     _record_chunks(P, *dims, bounds, offsets, caps, ends, voxel, overlap, done)
     pieces, start, q = [], np.zeros(m + 1, np.int64), 0
     for c, (t0, t1) in enumerate(zip(bounds[:-1], bounds[1:])):
-        if done[c] < 0:
-            return -1 - (t0 + (-1 - int(done[c]))), None, None
+        if done[c] < 0:  # tetrahedron t0 - 1 - done[c] outgrew the buffers
+            return int(done[c]) - t0, None, None
         if done[c] == t1 - t0:
-            n = int(ends[t1 - 1]) if t1 > t0 else 0
+            n = int(ends[t1 - 1])
             pieces.append((voxel[offsets[c]:offsets[c] + n], overlap[offsets[c]:offsets[c] + n]))
             start[t0 + 1:t1 + 1] = q + ends[t0:t1]
         else:  # the chunk overflowed its stretch
             e, v, o = _record_growing(P[t0:t1], dims, itype, int(2 * caps[c]))
             if v is None:
-                return -1 - (t0 + (-1 - int(e))), None, None
+                return int(e) - t0, None, None
             n = int(e[-1])
             pieces.append((v[:n], o[:n]))
             start[t0 + 1:t1 + 1] = q + e
         q += n
-    del voxel, overlap
     if not pieces:
         return start, np.empty(0, itype), np.empty(0)
-    if len(pieces) == 1:
-        return start, pieces[0][0].copy(), pieces[0][1].copy()
     return (start, np.concatenate([p[0] for p in pieces]),
             np.concatenate([p[1] for p in pieces]))

@@ -288,7 +288,7 @@ def _kernels():
     return _cvt._assign, _cvt._reassign
 
 
-def _drop_coincident(sites, labels, constraint, rows, cols, u, l, _assign):
+def _drop_coincident(sites, labels, constraint, rows, cols, u, l, assign):
     """Remove free sites within :data:`_COINCIDENT_PX` of another site, then re-find the
     regions.
 
@@ -307,6 +307,6 @@ def _drop_coincident(sites, labels, constraint, rows, cols, u, l, _assign):
         # keep the corner or border site; of two free sites, the lower index
         drop.add(int(b) if constraint[b] == -1 or constraint[a] != -1 else int(a))
     sites = np.ascontiguousarray(np.delete(sites, sorted(drop), axis=0))
-    _assign(rows, cols, sites, labels, u, l)
+    assign(rows, cols, sites, labels, u, l)
     return sites, labels
 

@@ -218,7 +218,7 @@ class TetraLabels:
     relabelled: int
     levels_report: dict
     mixed_relabelled: int
-    iso50_relabelled: int = 0
+    iso50_relabelled: int
 
 
 def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=None, timed=None,
