@@ -13,11 +13,6 @@ from numba import njit, prange
 _REACH = 2  # cells: sites farther than this cannot come near a pixel within one iteration
 _ROWS = 16  # rows per block of the parallel kernels: many blocks per thread even out the load
 
-parallel = True
-"""Whether :mod:`ctseg.cvt` runs the ``_parallel`` kernels (numba threads). A worker
-process forked for slices turns this off: the OpenMP runtime numba may use is not fork
-safe (a parallel kernel in a child of a process that ran one aborts the child), and a
-worker per core leaves no core for threads anyway."""
 
 
 @njit(cache=True)

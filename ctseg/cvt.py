@@ -4,7 +4,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from . import _cvt
+from . import _cvt, _threads
 from ._cvt import _region_sums
 from .errors import InputError, ParameterError
 from .params import DEFAULTS, check
@@ -281,9 +281,9 @@ def lloyd_cvt(rho, sites, tol_px=DEFAULTS.tol_px, max_iter=DEFAULTS.max_iter, pr
 
 
 def _kernels():
-    """The pixel assignment and the bound update: threaded unless :data:`ctseg._cvt.parallel`
+    """The pixel assignment and the bound update: threaded unless :data:`ctseg._threads.enabled`
     is off (a slice worker); both give the same result."""
-    if _cvt.parallel:
+    if _threads.enabled:
         return _cvt._assign_parallel, _cvt._reassign_parallel
     return _cvt._assign, _cvt._reassign
 

@@ -34,11 +34,10 @@ def pixel_overlaps(points, triangles, shape):
     """
     P = _corners(points, triangles)
     rows, cols = int(shape[0]), int(shape[1])
-    empty = np.zeros(0)
     none = np.zeros(0, np.int64)
-    k = _overlaps(P, rows, cols, empty, none, none, empty, empty, empty, empty, empty, empty)
+    k = _overlaps(P, rows, cols, none, none, np.zeros(0))
     t, p, a = np.empty(k, np.int64), np.empty(k, np.int64), np.empty(k)
-    _overlaps(P, rows, cols, empty, t, p, a, empty, empty, empty, empty, empty)
+    _overlaps(P, rows, cols, t, p, a)
     return t, p, a
 
 

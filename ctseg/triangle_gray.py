@@ -1,7 +1,8 @@
 """Stage 5: exact area-weighted gray value of each triangle (paper 6, SPEC 5)."""
 import numpy as np
 
-from ._clip import _corners, _overlaps
+from . import _clip, _threads
+from ._clip import _corners
 from ._validate import as_image
 from .errors import InputError
 
@@ -57,9 +58,8 @@ def triangle_gray(image, points, triangles):
     P = _corners(pts, triangles)
     area = np.zeros(len(P))
     weighted = np.zeros(len(P))
-    none = np.zeros(0, np.int64)
-    _overlaps(P, rows, cols, np.ascontiguousarray(img.ravel()), none, none, np.zeros(0), area,
-              weighted, np.zeros(0), np.zeros(0), np.zeros(0))
+    sums = _clip._triangle_sums_parallel if _threads.enabled else _clip._triangle_sums
+    sums(P, rows, cols, np.ascontiguousarray(img.ravel()), area, weighted)
     if np.any(area <= 0):
         raise InputError("triangles: a triangle covers no image area (degenerate?)")
     return weighted / area
@@ -93,10 +93,9 @@ def pixel_mean_of_triangles(values, points, triangles, shape):
                          f"{values.shape}")
     P = _corners(points, triangles)
     rows, cols = int(shape[0]), int(shape[1])
-    empty = np.zeros(0)
-    none = np.zeros(0, np.int64)
     covered = np.zeros(rows * cols)
     weighted = np.zeros(rows * cols)
-    _overlaps(P, rows, cols, empty, none, none, empty, empty, empty, values, covered, weighted)
+    sums = _clip._pixel_sums_parallel if _threads.enabled else _clip._pixel_sums
+    sums(P, rows, cols, values, covered, weighted)
     mean = np.divide(weighted, covered, out=np.zeros_like(weighted), where=covered > 0)
     return mean.reshape(rows, cols), covered.reshape(rows, cols)

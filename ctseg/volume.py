@@ -81,13 +81,13 @@ def _run_local(tasks, n_jobs, on_done):
 def _worker_init():
     """Workers leave Ctrl-C to the parent, which stops the run and reports once (a
     terminal sends SIGINT to the whole process group), and run the serial kernels
-    (:data:`ctseg._cvt.parallel`: a forked child must not start numba's threads)."""
+    (:data:`ctseg._threads.enabled`: a forked child must not start numba's threads)."""
     import signal
 
-    from . import _cvt
+    from . import _threads
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _cvt.parallel = False
+    _threads.enabled = False
 
 
 def _run_dask(tasks, client, on_done):

@@ -113,17 +113,17 @@ def test_no_site_left_a_hair_from_another():
 
 
 def test_threaded_and_serial_kernels_give_the_same_tessellation(monkeypatch):
-    """Slice workers run the serial kernels (ctseg._cvt.parallel off), a single process the
-    threaded ones: the same regions, sites and energies, bit for bit, as each pixel's
+    """Slice workers run the serial kernels (ctseg._threads.enabled off), a single process
+    the threaded ones: the same regions, sites and energies, bit for bit, as each pixel's
     update is its own."""
-    from ctseg import _cvt
+    from ctseg import _threads
 
     img, _ = disc_image(70, 3.0)
     rho = density_map(img)
     sites0 = ward_sites(rho, 90)
     runs = []
     for threaded in (True, False):
-        monkeypatch.setattr(_cvt, "parallel", threaded)
+        monkeypatch.setattr(_threads, "enabled", threaded)
         runs.append(lloyd_cvt(rho, sites0, max_iter=40))
     a, b = runs
     assert np.array_equal(a.labels, b.labels) and np.array_equal(a.sites, b.sites)

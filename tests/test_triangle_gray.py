@@ -131,3 +131,32 @@ def test_pixel_mean_of_triangles_is_the_transpose_of_triangle_gray():
     expect[:, [0, -1]] = 0.5
     expect[[0, 0, -1, -1], [0, -1, 0, -1]] = 0.25
     np.testing.assert_allclose(covered, expect, atol=1e-12)
+
+
+def test_threaded_and_serial_sums_give_the_same_bits(monkeypatch):
+    """The threaded kernels (one process) add in the serial order (slice workers): per
+    triangle and per pixel, the same bits; and both equal the sums over the overlap list."""
+    from ctseg import _threads
+    from ctseg.triangle_gray import pixel_mean_of_triangles
+
+    rng = np.random.default_rng(7)
+    rows, cols = 61, 83  # bands of rows do not divide it evenly
+    pts = np.vstack([[[0, 0], [cols - 1, 0], [0, rows - 1], [cols - 1, rows - 1]],
+                     rng.uniform([0, 0], [cols - 1, rows - 1], (300, 2))])
+    m = delaunay_mesh(pts)
+    image = rng.normal(100.0, 30.0, (rows, cols))
+    values = rng.normal(0.0, 1.0, len(m.triangles))
+    runs = []
+    for threaded in (True, False):
+        monkeypatch.setattr(_threads, "enabled", threaded)
+        runs.append((triangle_gray(image, m.points, m.triangles),
+                     *pixel_mean_of_triangles(values, m.points, m.triangles, (rows, cols))))
+    for a, b in zip(*runs):
+        assert np.array_equal(a, b)
+    t, p, a = pixel_overlaps(m.points, m.triangles, (rows, cols))
+    gray = np.bincount(t, a * image.ravel()[p], len(m.triangles)) / np.bincount(t, a)
+    np.testing.assert_allclose(runs[0][0], gray, rtol=1e-12)
+    covered = np.bincount(p, a, rows * cols)
+    np.testing.assert_allclose(runs[0][2].ravel(), covered, atol=1e-12)
+    np.testing.assert_allclose(runs[0][1].ravel(), np.bincount(p, a * values[t], rows * cols) / covered,
+                               atol=1e-12)
