@@ -2,20 +2,25 @@
 
 Private: :func:`ctseg.sites.ward_agglomerate` is the entry point.
 """
-import heapq
-
 import numpy as np
 from numba import njit
 
+_ARITY = 4  # children per heap node: half the depth of a binary heap, fewer cache misses
+_VERSION = np.int64(1) << 32  # two versions packed in one int64
+
 
 # Compiled (numba): the pure-Python heap took 0.4-0.6 s of 5.0 s at 512 x 512 / 1000 sites
-# and grows with the pixel count.
+# and grows with the pixel count. The heap is a 4-ary one over (n, 3) int64 records
+# (cost bits, pair, versions): numba's heapq over tuples took 1.2-1.3x as long, a binary
+# heap over three arrays (one per field) 1.15x.
 @njit(cache=True)
 def _ward_merges(w, s, ea, eb, m, n_clusters):
     """Greedy Ward merges on the graph (ea[k], eb[k]) until n_clusters remain.
 
     Same order as a textbook lazy-deletion heap of (cost, i, j, version_i, version_j) with
     i < j: the tuples order the merges completely, so ties go to the smaller indices.
+    A record holds the cost's bits (for costs >= 0 the int64 order of the bits is the
+    float order), ``i * m + j`` (the (i, j) order) and both versions (each < 2^32).
     Neighbour lists are linked lists in one record pool; a merge splices j's list onto
     i's, then compacts i's to distinct live clusters. Updates w and s ((m, d): the weighted
     coordinate sums, any dimension d) in place; returns each node's parent (the node it merged
@@ -39,18 +44,34 @@ def _ward_merges(w, s, ea, eb, m, n_clusters):
     alive = np.ones(m, np.bool_)
     version = np.zeros(m, np.int64)
     stamp = np.full(m, -1, np.int64)
+    cost = np.empty(1)
+    cost_bits = cost.view(np.int64)
+    mm = np.int64(m)
 
-    heap = [(0.0, np.int64(0), np.int64(0), np.int64(0), np.int64(0))]
-    heap.pop()
-    # first the distinct pairs (duplicated edges give equal tuples: harmless)
+    # first the distinct pairs (duplicated edges give equal records: harmless)
+    heap = np.empty((max(2 * e, 16), 3), np.int64)
     for k in range(e):
         i = min(ea[k], eb[k])
         j = max(ea[k], eb[k])
-        heap.append((_ward_pair_cost(w, s, i, j), i, j, np.int64(0), np.int64(0)))
-    heapq.heapify(heap)
+        cost[0] = _ward_pair_cost(w, s, i, j)
+        heap[k, 0] = cost_bits[0]
+        heap[k, 1] = i * mm + j
+        heap[k, 2] = 0
+    n = e
+    for pos in range((n - 2) // _ARITY, -1, -1):
+        _sift_down(heap, n, pos)
     n_alive = m
-    while n_alive > n_clusters and len(heap) > 0:
-        _, i, j, vi, vj = heapq.heappop(heap)
+    while n_alive > n_clusters and n > 0:
+        i = heap[0, 1] // mm
+        j = heap[0, 1] % mm
+        vi = heap[0, 2] // _VERSION
+        vj = heap[0, 2] % _VERSION
+        n -= 1
+        if n > 0:
+            heap[0, 0] = heap[n, 0]
+            heap[0, 1] = heap[n, 1]
+            heap[0, 2] = heap[n, 2]
+            _sift_down(heap, n, 0)
         if not (alive[i] and alive[j]) or version[i] != vi or version[j] != vj:
             continue
         w[i] += w[j]
@@ -85,7 +106,16 @@ def _ward_merges(w, s, ea, eb, m, n_clusters):
             stamp[k] = n_alive
             a = min(i, k)
             b = max(i, k)
-            heapq.heappush(heap, (_ward_pair_cost(w, s, a, b), a, b, version[a], version[b]))
+            if n == heap.shape[0]:
+                grown = np.empty((2 * n, 3), np.int64)
+                grown[:n] = heap[:n]
+                heap = grown
+            cost[0] = _ward_pair_cost(w, s, a, b)
+            heap[n, 0] = cost_bits[0]
+            heap[n, 1] = a * mm + b
+            heap[n, 2] = version[a] * _VERSION + version[b]
+            _sift_up(heap, n)
+            n += 1
             prev = r
             r = nxt[r]
         tail[i] = prev
@@ -93,6 +123,53 @@ def _ward_merges(w, s, ea, eb, m, n_clusters):
             head[i] = -1
         n_alive -= 1
     return parent, n_alive
+
+
+@njit(cache=True)
+def _sift_down(heap, n, pos):
+    """Move the record at pos down to its place among the first n."""
+    c0 = heap[pos, 0]
+    c1 = heap[pos, 1]
+    c2 = heap[pos, 2]
+    while True:
+        first = _ARITY * pos + 1
+        if first >= n:
+            break
+        best = first
+        for q in range(first + 1, min(first + _ARITY, n)):
+            if heap[q, 0] < heap[best, 0] or (heap[q, 0] == heap[best, 0]
+                                              and heap[q, 1] < heap[best, 1]):
+                best = q
+        if heap[best, 0] < c0 or (heap[best, 0] == c0 and heap[best, 1] < c1):
+            heap[pos, 0] = heap[best, 0]
+            heap[pos, 1] = heap[best, 1]
+            heap[pos, 2] = heap[best, 2]
+            pos = best
+        else:
+            break
+    heap[pos, 0] = c0
+    heap[pos, 1] = c1
+    heap[pos, 2] = c2
+
+
+@njit(cache=True)
+def _sift_up(heap, pos):
+    """Move the record at pos up to its place."""
+    c0 = heap[pos, 0]
+    c1 = heap[pos, 1]
+    c2 = heap[pos, 2]
+    while pos > 0:
+        up = (pos - 1) // _ARITY
+        if c0 < heap[up, 0] or (c0 == heap[up, 0] and c1 < heap[up, 1]):
+            heap[pos, 0] = heap[up, 0]
+            heap[pos, 1] = heap[up, 1]
+            heap[pos, 2] = heap[up, 2]
+            pos = up
+        else:
+            break
+    heap[pos, 0] = c0
+    heap[pos, 1] = c1
+    heap[pos, 2] = c2
 
 
 @njit(cache=True)

@@ -2,9 +2,8 @@
 SPEC 2; on voxels SPEC 9.2)."""
 import numpy as np
 
-from ._validate import check_number
+from ._validate import check_number, check_spacing
 from ._ward import _ward_merges
-from ._validate import check_spacing
 from .errors import InputError, ParameterError
 from .params import AUTO, DEFAULTS, SPECS, check
 
@@ -65,6 +64,8 @@ def ward_agglomerate(weights, centroids, edges, n_clusters):
     c = np.asarray(centroids, dtype=np.float64)
     s = np.ascontiguousarray(c * w[:, None])
     m = len(w)
+    if m >= 2**31:  # the merge heap packs a pair in one int64: i * m + j
+        raise InputError(f"Ward clustering: {m} nodes, at most 2^31 - 1; use larger blocks")
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     edges = edges[edges[:, 0] != edges[:, 1]]
     parent, n_alive = _ward_merges(w, s, np.ascontiguousarray(edges[:, 0]),

@@ -133,3 +133,58 @@ def test_ward_block_px_auto_and_none_are_the_default():
     for bad in (0, 2.5, "big", -1):
         with pytest.raises(ParameterError, match="ward_block_px"):
             ward_sites(rho, 20, ward_block_px=bad)
+
+
+def heapq_ward(weights, points, edges, n_clusters):
+    """The docstring's rule, literally: a lazy-deletion heapq of (cost, i, j, v_i, v_j),
+    i < j; merge j into i. Returns the final clusters."""
+    import heapq
+
+    w = {i: float(x) for i, x in enumerate(weights)}
+    s = {i: points[i] * weights[i] for i in range(len(weights))}
+    nbr = {i: set() for i in w}
+    for a, b in edges:
+        nbr[a].add(b)
+        nbr[b].add(a)
+    version = dict.fromkeys(w, 0)
+    members = {i: {i} for i in w}
+
+    def cost(i, j):
+        d = s[i] / w[i] - s[j] / w[j]
+        return w[i] * w[j] / (w[i] + w[j]) * float(d @ d)
+
+    heap = [(cost(min(a, b), max(a, b)), min(a, b), max(a, b), 0, 0) for a, b in edges]
+    heapq.heapify(heap)
+    while len(members) > n_clusters:
+        _, i, j, vi, vj = heapq.heappop(heap)
+        if i not in members or j not in members or version[i] != vi or version[j] != vj:
+            continue
+        w[i] += w[j]
+        s[i] = s[i] + s[j]
+        members[i] |= members.pop(j)
+        nbr[i] = (nbr[i] | nbr.pop(j)) - {i, j}
+        version[i] += 1
+        for k in nbr[i]:
+            nbr[k] = (nbr[k] - {j}) | {i}
+            a, b = min(i, k), max(i, k)
+            heapq.heappush(heap, (cost(a, b), a, b, version[a], version[b]))
+    return sorted(tuple(sorted(c)) for c in members.values())
+
+
+@pytest.mark.parametrize("uniform", [True, False])
+def test_ward_merge_order_is_the_lazy_heaps_with_its_ties(uniform):
+    """Equal weights on a grid make many merge costs equal: the ties must go as the
+    textbook heap of tuples sends them (the compiled heap orders records by cost bits and
+    packed pairs)."""
+    rng = np.random.default_rng(5)
+    rows, cols = 9, 11
+    yy, xx = np.mgrid[0:rows, 0:cols]
+    pts = np.column_stack([xx.ravel(), yy.ravel()]).astype(float)
+    w = np.ones(rows * cols) if uniform else rng.uniform(0.1, 2.0, rows * cols)
+    ids = np.arange(rows * cols).reshape(rows, cols)
+    edges = np.concatenate([np.column_stack([ids[:, :-1].ravel(), ids[:, 1:].ravel()]),
+                            np.column_stack([ids[:-1].ravel(), ids[1:].ravel()])])
+    for k in (3, 17, 40):
+        labels, _, _ = ward_agglomerate(w, pts, edges, k)
+        got = sorted(tuple(np.flatnonzero(labels == c)) for c in range(k))
+        assert got == heapq_ward(w, pts, edges, k)
