@@ -1,8 +1,8 @@
 """Whether the compiled kernels may start numba's threads.
 
-Private: the threaded kernels (``parallel=True``) of :mod:`ctseg._cvt` and
-:mod:`ctseg._clip` give the same results as their serial twins, bit for bit; their callers
-pick one by :data:`enabled`.
+Private: the threaded kernels (``parallel=True``) of :mod:`ctseg._cvt`, :mod:`ctseg._clip`
+and :mod:`ctseg.projection` give the same results as their serial twins, bit for bit;
+their callers pick one by :data:`enabled`.
 """
 
 enabled = True

@@ -5,7 +5,11 @@ Shared by the CT simulation (:mod:`ctseg.phantoms`) and the metal-streak correct
 bins one pixel wide spanning the image diagonal, angles over 180 degrees.
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from . import _threads
+
+_BAND_ROWS = 8  # rows per band of the threaded back-projection
 
 
 def detector_bins(shape):
@@ -59,13 +63,15 @@ def forward_project(image, angles):
 
 
 @njit(cache=True)
-def _backproject(proj, cos_a, sin_a, ny, nx, out):
+def _backproject_rows(proj, cos_a, sin_a, ny, nx, r0, r1, out):
+    """Add the back-projection of every angle onto rows r0..r1-1 of ``out`` (angles in
+    order, so a pixel's sum does not depend on how the rows are split)."""
     n_det = proj.shape[1]
     half = (n_det - 1) / 2.0
     cy, cx = (ny - 1) / 2.0, (nx - 1) / 2.0
     for a in range(cos_a.shape[0]):
         ca, sa = cos_a[a], sin_a[a]
-        for r in range(ny):
+        for r in range(r0, r1):
             base = (r - cy) * sa + half
             for c in range(nx):
                 t = (c - cx) * ca + base
@@ -75,6 +81,19 @@ def _backproject(proj, cos_a, sin_a, ny, nx, out):
                     out[r, c] += proj[a, j] * (1.0 - f) + proj[a, j + 1] * f
                 elif j == n_det - 1 and t == j:
                     out[r, c] += proj[a, j]
+
+
+@njit(cache=True)
+def _backproject(proj, cos_a, sin_a, ny, nx, out):
+    _backproject_rows(proj, cos_a, sin_a, ny, nx, 0, ny, out)
+
+
+@njit(cache=True, parallel=True)
+def _backproject_parallel(proj, cos_a, sin_a, ny, nx, out):
+    """:func:`_backproject`, bands of rows in parallel: the same bits."""
+    for b in prange((ny + _BAND_ROWS - 1) // _BAND_ROWS):
+        _backproject_rows(proj, cos_a, sin_a, ny, nx, b * _BAND_ROWS,
+                          min(ny, (b + 1) * _BAND_ROWS), out)
 
 
 def filtered_backprojection(sinogram, angles, shape):
@@ -99,6 +118,7 @@ def filtered_backprojection(sinogram, angles, shape):
     filt = 2 * np.abs(freq) * np.sinc(freq)  # Shepp-Logan: ramp x sinc
     proj = np.fft.ifft(np.fft.fft(sino, pad, axis=1) * filt, axis=1).real[:, :n_det]
     rec = np.zeros((int(shape[0]), int(shape[1])))
-    _backproject(np.ascontiguousarray(proj), np.cos(angles), np.sin(angles),
-                 rec.shape[0], rec.shape[1], rec)
+    backproject = _backproject_parallel if _threads.enabled else _backproject
+    backproject(np.ascontiguousarray(proj), np.cos(angles), np.sin(angles),
+                rec.shape[0], rec.shape[1], rec)
     return rec * np.pi / (2 * len(angles))
