@@ -143,9 +143,13 @@ def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_
     band = ndimage.binary_dilation(change, iterations=band_px)
     target = img[band]
 
+    seen = {}  # the first parabola's three points are grid points: blur each width once
+
     def misfit(s):
-        model = ndimage.gaussian_filter(lev, s, mode="nearest") if s > 0 else lev
-        return float(np.mean((target - model[band]) ** 2))
+        if s not in seen:
+            model = ndimage.gaussian_filter(lev, s, mode="nearest") if s > 0 else lev
+            seen[s] = float(np.mean((target - model[band]) ** 2))
+        return seen[s]
 
     def parabola(xs):  # vertex of the parabola through three equally spaced points
         c0, c1, c2 = (misfit(x) for x in xs)
