@@ -3,6 +3,7 @@ of the pixels away from edges, on the 0-255 scale, for one slice or a stack of s
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, uniform_filter
 
+from ._reduce import weighted_variance
 from ._validate import as_image
 from .density import density_map
 from .geometry import slice_axis, volume_slice
@@ -41,7 +42,7 @@ def weighted_spread(values, weights):
     keep = (v >= lo) & (v <= hi)
     if keep.sum() < 2:
         return 0.0
-    return float(np.sqrt(np.cov(v[keep], aweights=w[keep])))
+    return float(np.sqrt(weighted_variance(v[keep], w[keep])))
 
 
 def material_modes(gray, area, bandwidth, min_area, separation, n_modes=None):

@@ -9,6 +9,7 @@ these names) to keep each module short.
 import numpy as np
 from scipy import ndimage
 
+from ._reduce import dot
 from ._validate import check_number
 from .errors import ParameterError
 from .params import DEFAULTS, CorrectionParams
@@ -187,7 +188,7 @@ def _fit_columns(img, cols, k):
         scales[j] = s if s > 0 else 1.0
         vecs.append(v / scales[j])
     sums = [np.bincount(k, v, minlength=count.size) for v in vecs]
-    prod = np.array([[float(u @ v) - float((su * sv / count).sum()) for v, sv in zip(vecs, sums)]
+    prod = np.array([[dot(u, v) - float((su * sv / count).sum()) for v, sv in zip(vecs, sums)]
                      for u, su in zip(vecs, sums)])
     ii, rhs, gram = prod[0, 0], prod[1:, 0], prod[1:, 1:]
     diag = np.diag(gram)
@@ -237,5 +238,5 @@ def fit_streak_weight(image, basis, classes, mask):
     if s_b == 0.0 or s_i == 0.0:
         return 0.0, 0.0
     b_c, i_c = b_c / s_b, i_c / s_i
-    bb, ib, ii = float(b_c @ b_c), float(i_c @ b_c), float(i_c @ i_c)
+    bb, ib, ii = dot(b_c, b_c), dot(i_c, b_c), dot(i_c, i_c)
     return -ib / bb * (s_i / s_b), min(1.0, ib * ib / (bb * ii))
