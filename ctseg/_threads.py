@@ -10,3 +10,9 @@ enabled = True
 the OpenMP runtime numba may use is not fork safe (a parallel kernel in a child of a
 process that ran one aborts the child), and a worker per core leaves no core for threads
 anyway."""
+
+
+def pick(serial, threaded):
+    """``threaded`` where threads are :data:`enabled`, else ``serial`` (kernels or tuples
+    of kernels)."""
+    return threaded if enabled else serial

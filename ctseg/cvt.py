@@ -283,9 +283,8 @@ def lloyd_cvt(rho, sites, tol_px=DEFAULTS.tol_px, max_iter=DEFAULTS.max_iter, pr
 def _kernels():
     """The pixel assignment and the bound update: threaded unless :data:`ctseg._threads.enabled`
     is off (a slice worker); both give the same result."""
-    if _threads.enabled:
-        return _cvt._assign_parallel, _cvt._reassign_parallel
-    return _cvt._assign, _cvt._reassign
+    return _threads.pick((_cvt._assign, _cvt._reassign),
+                         (_cvt._assign_parallel, _cvt._reassign_parallel))
 
 
 def _drop_coincident(sites, labels, constraint, rows, cols, u, l, assign):

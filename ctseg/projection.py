@@ -118,7 +118,7 @@ def filtered_backprojection(sinogram, angles, shape):
     filt = 2 * np.abs(freq) * np.sinc(freq)  # Shepp-Logan: ramp x sinc
     proj = np.fft.ifft(np.fft.fft(sino, pad, axis=1) * filt, axis=1).real[:, :n_det]
     rec = np.zeros((int(shape[0]), int(shape[1])))
-    backproject = _backproject_parallel if _threads.enabled else _backproject
+    backproject = _threads.pick(_backproject, _backproject_parallel)
     backproject(np.ascontiguousarray(proj), np.cos(angles), np.sin(angles),
                 rec.shape[0], rec.shape[1], rec)
     return rec * np.pi / (2 * len(angles))

@@ -58,7 +58,7 @@ def triangle_gray(image, points, triangles):
     P = _corners(pts, triangles)
     area = np.zeros(len(P))
     weighted = np.zeros(len(P))
-    sums = _clip._triangle_sums_parallel if _threads.enabled else _clip._triangle_sums
+    sums = _threads.pick(_clip._triangle_sums, _clip._triangle_sums_parallel)
     sums(P, rows, cols, np.ascontiguousarray(img.ravel()), area, weighted)
     if np.any(area <= 0):
         raise InputError("triangles: a triangle covers no image area (degenerate?)")
@@ -95,7 +95,7 @@ def pixel_mean_of_triangles(values, points, triangles, shape):
     rows, cols = int(shape[0]), int(shape[1])
     covered = np.zeros(rows * cols)
     weighted = np.zeros(rows * cols)
-    sums = _clip._pixel_sums_parallel if _threads.enabled else _clip._pixel_sums
+    sums = _threads.pick(_clip._pixel_sums, _clip._pixel_sums_parallel)
     sums(P, rows, cols, values, covered, weighted)
     mean = np.divide(weighted, covered, out=np.zeros_like(weighted), where=covered > 0)
     return mean.reshape(rows, cols), covered.reshape(rows, cols)

@@ -40,16 +40,21 @@ def naive_ward(weights, points, edges, n_clusters):
     return sorted(tuple(sorted(c)) for c in clusters)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_ward_matches_naive_reference(seed):
-    rng = np.random.default_rng(seed)
-    rows, cols = 6, 7
+def grid_graph(rows, cols):
+    """Pixel centres (x, y) of a rows x cols grid and its 4-connected edges."""
     yy, xx = np.mgrid[0:rows, 0:cols]
     pts = np.column_stack([xx.ravel(), yy.ravel()]).astype(float)
-    w = rng.uniform(0.1, 2.0, rows * cols)
     ids = np.arange(rows * cols).reshape(rows, cols)
     edges = np.concatenate([np.column_stack([ids[:, :-1].ravel(), ids[:, 1:].ravel()]),
                             np.column_stack([ids[:-1].ravel(), ids[1:].ravel()])])
+    return pts, edges
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_ward_matches_naive_reference(seed):
+    rng = np.random.default_rng(seed)
+    pts, edges = grid_graph(6, 7)
+    w = rng.uniform(0.1, 2.0, len(pts))
     for k in (1, 5, 12):
         labels, cw, cc = ward_agglomerate(w, pts, edges, k)
         got = sorted(tuple(np.flatnonzero(labels == c)) for c in range(k))
@@ -177,13 +182,8 @@ def test_ward_merge_order_is_the_lazy_heaps_with_its_ties(uniform):
     textbook heap of tuples sends them (the compiled heap orders records by cost bits and
     packed pairs)."""
     rng = np.random.default_rng(5)
-    rows, cols = 9, 11
-    yy, xx = np.mgrid[0:rows, 0:cols]
-    pts = np.column_stack([xx.ravel(), yy.ravel()]).astype(float)
-    w = np.ones(rows * cols) if uniform else rng.uniform(0.1, 2.0, rows * cols)
-    ids = np.arange(rows * cols).reshape(rows, cols)
-    edges = np.concatenate([np.column_stack([ids[:, :-1].ravel(), ids[:, 1:].ravel()]),
-                            np.column_stack([ids[:-1].ravel(), ids[1:].ravel()])])
+    pts, edges = grid_graph(9, 11)
+    w = np.ones(len(pts)) if uniform else rng.uniform(0.1, 2.0, len(pts))
     for k in (3, 17, 40):
         labels, _, _ = ward_agglomerate(w, pts, edges, k)
         got = sorted(tuple(np.flatnonzero(labels == c)) for c in range(k))
