@@ -10,7 +10,8 @@ from .errors import InputError, ParameterError
 from .params import DEFAULTS, check
 
 _COINCIDENT_PX = 1e-6
-"""Free sites closer than this to another site are dropped after the iterations."""
+"""Free sites closer than this to a border line are put on it, and then those closer than
+this to another site dropped, after the iterations."""
 
 
 @dataclass
@@ -85,7 +86,9 @@ def lloyd_cvt(rho, sites, tol_px=DEFAULTS.tol_px, max_iter=DEFAULTS.max_iter, pr
     minimiser (the centroid projected onto its line): eq. (6) is not that minimiser, and
     taking it blindly can raise F. With fixed classes and exact nearest-site regions, F
     never increases, which is what makes Lloyd's method converge. A region that lost all
-    its pixels keeps its site (counted in ``empty_regions``).
+    its pixels keeps its site (counted in ``empty_regions``). After the iterations, a free
+    site within a rounding error of a border line is put on it, and one on another site
+    removed, so that no Delaunay triangle is flat.
 
     Parameters
     ----------
@@ -275,7 +278,10 @@ def lloyd_cvt(rho, sites, tol_px=DEFAULTS.tol_px, max_iter=DEFAULTS.max_iter, pr
         if move < tol_px:
             converged = True
             break
-    sites, labels = _drop_coincident(sites, labels, constraint, rows, cols, u, l, _assign)
+    sites, snapped = _snap_to_border(sites, constraint, rho.shape)
+    sites, dropped = _drop_coincident(sites, constraint)
+    if snapped or dropped:  # the regions of the sites returned
+        _assign(rows, cols, sites, labels, u, l)
     return CVTResult(sites=sites, labels=labels.reshape(rows, cols), energy=energy,
                      n_iter=it, converged=converged, empty_regions=empty_total)
 
@@ -287,9 +293,32 @@ def _kernels():
                          (_cvt._assign_parallel, _cvt._reassign_parallel))
 
 
-def _drop_coincident(sites, labels, constraint, rows, cols, u, l, assign):
-    """Remove free sites within :data:`_COINCIDENT_PX` of another site, then re-find the
-    regions.
+def _snap_to_border(sites, constraint, shape):
+    """Put free sites within :data:`_COINCIDENT_PX` of a border line exactly on it; returns
+    the sites and whether any moved.
+
+    A free site whose region holds only pixels of one border line has its centroid on that
+    line, but rounding can leave it a hair off: one pixel at x = cols - 1 has
+    ``w * x / w`` = 12.999999999999998 for x = 13. Between two border sites of that line
+    it then makes a flat triangle with them (Delaunay's, but of zero area, which
+    :func:`ctseg.delaunay_mesh` rejects); on the line, the three are points of one hull
+    edge and no triangle is flat. Moving a site by a rounding error leaves the energy as
+    it is.
+    """
+    rows, cols = shape
+    sites = sites.copy()
+    free = constraint == -1
+    moved = False
+    for axis, value in ((0, 0.0), (0, cols - 1.0), (1, 0.0), (1, rows - 1.0)):
+        near = free & (np.abs(sites[:, axis] - value) < _COINCIDENT_PX) & (sites[:, axis] != value)
+        sites[near, axis] = value
+        moved |= bool(near.any())
+    return np.ascontiguousarray(sites), moved
+
+
+def _drop_coincident(sites, constraint):
+    """Remove free sites within :data:`_COINCIDENT_PX` of another site; returns the sites
+    and whether any was removed (the caller re-finds the regions).
 
     A free site whose region holds only border pixels has its centroid on the border line,
     where rounding can leave it a hair from a border site; Qhull would then leave one of
@@ -298,14 +327,11 @@ def _drop_coincident(sites, labels, constraint, rows, cols, u, l, assign):
     """
     pairs = cKDTree(sites).query_pairs(_COINCIDENT_PX, output_type="ndarray")
     if len(pairs) == 0:
-        return sites, labels
+        return sites, False
     drop = set()
     for a, b in pairs:
         if a in drop or b in drop:
             continue
         # keep the corner or border site; of two free sites, the lower index
         drop.add(int(b) if constraint[b] == -1 or constraint[a] != -1 else int(a))
-    sites = np.ascontiguousarray(np.delete(sites, sorted(drop), axis=0))
-    assign(rows, cols, sites, labels, u, l)
-    return sites, labels
-
+    return np.ascontiguousarray(np.delete(sites, sorted(drop), axis=0)), True

@@ -112,6 +112,28 @@ def test_no_site_left_a_hair_from_another():
     assert len(np.unique(seg.triangles)) == len(seg.points)
 
 
+
+def test_no_site_left_a_hair_inside_a_border_line():
+    # found by hypothesis: a free site whose region is the one pixel (13, 1) of a 4 x 14
+    # noise image ended at x = w * 13 / w = 12.999999999999998, and with the border sites
+    # (13, 0) and (13, 2) made a flat Delaunay triangle: segment_image raised InputError
+    from ctseg import segment_image
+    from ctseg.sites import initial_sites
+    from ctseg.triangulation import triangle_areas
+
+    img = np.random.default_rng(14).normal(size=(4, 14))
+    rho = density_map(img)
+    r = lloyd_cvt(rho, initial_sites(rho, 33, init="ward"))
+    for axis, value in ((0, 0.0), (0, 13.0), (1, 0.0), (1, 3.0)):
+        gap = np.abs(r.sites[:, axis] - value)
+        assert not np.any((gap > 0) & (gap < 1e-3))  # on the line or clear of it
+    px = np.column_stack([c.ravel() for c in np.mgrid[0:4, 0:14][::-1]]).astype(float)
+    assert np.array_equal(r.labels.ravel(), nearest_site(px, r.sites))
+    seg = segment_image(img, n_sites=33)
+    a = triangle_areas(seg.points, seg.triangles)
+    assert np.all(a > 1e-6) and np.isclose(a.sum(), 3 * 13)
+    assert len(np.unique(seg.triangles)) == len(seg.points)
+
 def test_threaded_and_serial_kernels_give_the_same_tessellation(monkeypatch):
     """Slice workers run the serial kernels (ctseg._threads.enabled off), a single process
     the threaded ones: the same regions, sites and energies, bit for bit, as each pixel's
