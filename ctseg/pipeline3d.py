@@ -3,7 +3,7 @@ surfaces, from the gray values at once (no label map first).
 
 :func:`segment_volume_3d` runs the stages of :mod:`ctseg.stages3d` in order (the VTK stage
 filters call the same functions one at a time)."""
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -11,11 +11,11 @@ from ._validate import as_volume, check_spacing
 from .beam_hardening import correct_streaks
 from .errors import InputError
 from .levels import volume_levels
-from .params import resolve
+from .params import AUTO, resolve
 from .pipeline import stage_runner
 from .resources import SITE_3D_BYTES, VOLUME_3D_BYTES_PER_VOXEL, check_memory
 from .stages3d import (cvt_sites_3d, default_n_sites_3d, density_3d,  # noqa: F401 (re-export)
-                       label_tetrahedra, n_sites_3d, tetrahedra_3d)
+                       label_tetrahedra, n_sites_3d, subpixel_boundary_3d, tetrahedra_3d)
 from .surfaces import material_interfaces, material_surface
 from .tetra_gray import VoxelOverlaps
 from .tetrahedra import tetra_quality
@@ -70,8 +70,10 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     density (SPEC 9.1) -> Ward sites on voxel blocks (9.2) -> voxel CVT (9.3) -> Delaunay
     tetrahedra, slivers perturbed away (9.4, :func:`ctseg.tetrahedra.perturb_slivers`) ->
     exact tetrahedron gray (9.5) -> recursive graph cut on the
-    tetrahedron graph with the levels and rules of 2D (9.6) -> interfaces and closed
-    surfaces per material (9.7). Each stage is a function of :mod:`ctseg.stages3d`, which
+    tetrahedron graph with the levels and rules of 2D (9.6) -> with ``subpixel_boundary``,
+    vertices between two materials moved to the ISO-50 crossing (SPEC 10,
+    :func:`ctseg.stages3d.subpixel_boundary_3d`) -> interfaces and closed surfaces per
+    material (9.7). Each stage is a function of :mod:`ctseg.stages3d`, which
     the VTK stage filters call too.
 
     Parameters
@@ -172,6 +174,14 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
                               timed=timed, overlaps=overlaps)
     del overlaps
     material, mat_gray = labels.material, labels.material_gray
+    n_moved = 0
+    if p.subpixel_boundary:  # the labels stay; the mesh's vertices move
+        moved = timed("subpixel_boundary", 0.92, subpixel_boundary_3d, image, mesh, gray,
+                      material, p, sp, renumber=p.gray_levels == AUTO)
+        mesh = replace(mesh, points=moved.points)
+        gray, material, n_moved = moved.gray, moved.material, moved.n_moved
+        if moved.material_gray is not None:
+            mat_gray = moved.material_gray
     faces, mat_a, mat_b = material_interfaces(mesh, material)
     report(0.95, "surfaces")
     surfaces = timed("surfaces", 0.95, lambda: [material_surface(mesh, material, k)
@@ -205,6 +215,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "relabelled_for_manifold": labels.relabelled,
         "relabelled_mixed": labels.mixed_relabelled,
         "relabelled_iso50": labels.iso50_relabelled,
+        "subpixel_moved": int(n_moved),
         "element_quality": quality,
         "slivers_left": int(slivers),
         "streak_weights": streak_weights,

@@ -26,6 +26,7 @@ from .pipeline import DENSITY_KEYS
 from .recursive_cut import order_by_gray, segment_triangles
 from .site_budget import site_budget_3d
 from .sites import initial_sites_3d
+from .subpixel import subpixel_mesh
 from .surfaces import repair_pinched_edges
 from .tetra_gray import VoxelOverlaps
 from .tetrahedra import TetraMesh, face_graph, perturb_slivers, tetra_volumes
@@ -150,6 +151,50 @@ def tetrahedra_3d(sites, shape, params=None, spacing=None):
     _, mesh, slivers = perturb_slivers(sites, box, p.sliver_min_dihedral_deg, p.sliver_rounds,
                                        seed=p.seed)
     return mesh, slivers
+
+
+def subpixel_boundary_3d(image, mesh, gray, material, params=None, spacing=None,
+                         renumber=True):
+    """3D stage 8 (SPEC 10): the vertices between exactly two materials moved to the ISO-50
+    crossing of the gray (:func:`ctseg.subpixel.subpixel_mesh` on the tetrahedra, moves of
+    at most ``subpixel_max_shift`` of the shortest incident edge), no tetrahedron inverted,
+    squashed below a fifth of its volume or turned into a sliver (smallest dihedral angle
+    below ``sliver_min_dihedral_deg`` and its own); the labels stay.
+
+    Parameters
+    ----------
+    image : (nz, ny, nx) ndarray
+        The volume the mesh was labelled on (after any streak correction).
+    mesh : ctseg.tetrahedra.TetraMesh
+    gray, material : (m,) array_like
+        From :func:`label_tetrahedra` (input units; 0..K-1).
+    params, spacing
+        As :func:`segment_volume_3d`.
+    renumber : bool
+        Number the materials again by their mean gray (False with given levels).
+
+    Returns
+    -------
+    ctseg.subpixel.MovedMesh
+        Points in the box's physical coordinates.
+
+    Example
+    -------
+    >>> vol = np.where(np.arange(12) < 5.7, 10.0, 90.0)[None, None, :].repeat(12, 0).repeat(12, 1)
+    >>> mesh, _ = tetrahedra_3d(np.array([[x, y, z] for x in (0, 5, 11) for y in (0, 11)
+    ...                                   for z in (0, 11)] + [[5.0, 5.5, 5.5]], float), vol.shape)
+    >>> from ctseg.tetra_gray import tetra_gray
+    >>> cx = mesh.points[mesh.tetrahedra].mean(axis=1)[:, 0]
+    >>> gray = tetra_gray(vol, mesh.points, mesh.tetrahedra)
+    >>> out = subpixel_boundary_3d(vol, mesh, gray, (cx > 5).astype(int))
+    >>> centre = np.argmin(np.abs(mesh.points - [5.0, 5.5, 5.5]).sum(axis=1))
+    >>> out.n_moved, round(float(out.points[centre, 0]), 1)  # the edge is at x = 5.5
+    (1, 5.5)
+    """
+    p = resolve(params)
+    return subpixel_mesh(image, mesh.points, mesh.tetrahedra, gray, material,
+                         p.subpixel_max_shift, renumber, spacing=_spacing(spacing),
+                         min_dihedral_deg=p.sliver_min_dihedral_deg)
 
 
 def tetra_mesh(points, tetrahedra):

@@ -1,5 +1,7 @@
-"""Sub-pixel placement of material boundaries (SPEC 10): boundary vertices moved to the
-ISO-50 crossing of the gray between their two materials' levels."""
+"""Sub-element placement of material boundaries (SPEC 10): vertices between two materials
+moved to the ISO-50 crossing of the gray between their levels. One implementation for
+triangles over a slice and tetrahedra over a volume: the dimension is the mesh's."""
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -8,15 +10,24 @@ from scipy.ndimage import gaussian_filter, map_coordinates
 from .errors import InputError, ParameterError
 from .params import DEFAULTS
 from .recursive_cut import order_by_gray
+from .tetra_gray import VoxelOverlaps
+from .tetrahedra import dihedral_angles, tetra_volumes
 from .triangle_gray import triangle_gray
-from .triangulation import triangle_areas, triangle_edges
+from .triangulation import triangle_areas
 
 MIN_AREA_RATIO = 0.2
-"""A move is refused when it leaves an incident triangle with less than this share of its
-area (or inverts it)."""
+"""A move is refused when it leaves an incident element with less than this share of its
+area (volume), or inverts it."""
 
 BACKTRACK_STEPS = 4
 """A refused move is retried at half the shift, this many times."""
+
+EDGE_PX = 1.5
+"""A crossing counts only where the gray, within this many pixels (voxels of the finest
+axis) either side of it along the gradient, reaches the outer quarters of the two levels'
+contrast: a real step between the two materials, not a plateau of a third gray near the
+half-way (a thin layer of a material the labels missed, whose gray lies near the ISO-50
+of its neighbours: there the crossing wanders through the layer with the noise)."""
 
 
 def material_levels_of_mesh(gray, area, material, interior, n_materials):
@@ -45,59 +56,111 @@ def material_levels_of_mesh(gray, area, material, interior, n_materials):
     return levels
 
 
-def _vertex_materials(triangles, material, n_points):
-    """Per vertex: the lowest and highest material of its triangles, and how many
-    different ones (-1, -1, 0 for a vertex of no triangle)."""
-    pairs = np.unique(np.column_stack([triangles.ravel(), np.repeat(material, 3)]), axis=0)
-    count = np.bincount(pairs[:, 0], minlength=n_points)
+def _vertex_materials(elements, material, n_points):
+    """Per vertex: the lowest and highest material of its elements, and how many
+    different ones (-1, -1, 0 for a vertex of no element)."""
+    k = int(material.max()) + 1 if len(material) else 1
+    # distinct (vertex, material) pairs as one sorted integer key each
+    key = np.unique(elements.ravel() * k + np.repeat(material, elements.shape[1]))
+    vertex, mat = key // k, key % k
+    count = np.bincount(vertex, minlength=n_points)
     lo = np.full(n_points, -1)
     hi = np.full(n_points, -1)
-    first = np.searchsorted(pairs[:, 0], np.arange(n_points))
+    first = np.searchsorted(vertex, np.arange(n_points))
     has = count > 0
-    lo[has] = pairs[first[has], 1]
-    hi[has] = pairs[first[has] + count[has] - 1, 1]
+    lo[has] = mat[first[has]]
+    hi[has] = mat[first[has] + count[has] - 1]
     return lo, hi, count
+
+
+def element_measures(points, elements):
+    """Signed areas of triangles (points (n, 2)) or volumes of tetrahedra (points (n, 3))."""
+    return (triangle_areas(points, elements) if points.shape[1] == 2
+            else tetra_volumes(points, elements))
+
+
+def _min_angles(points, elements, min_dihedral_deg):
+    """Smallest dihedral angle of each tetrahedron, or None where no angle is checked
+    (triangles, or ``min_dihedral_deg`` 0)."""
+    if points.shape[1] == 2 or not min_dihedral_deg:
+        return None
+    return dihedral_angles(points, elements).min(axis=1)
+
+
+class _Quality:
+    """What a move must keep of each element: at least :data:`MIN_AREA_RATIO` of its
+    measure, and (tetrahedra) a smallest dihedral angle of at least ``min_dihedral_deg``
+    or, for an element already below it, of its own."""
+
+    def __init__(self, points, elements, min_dihedral_deg):
+        self.elements, self.min_dihedral_deg = elements, min_dihedral_deg
+        self.measure0 = element_measures(points, elements)
+        angles = _min_angles(points, elements, min_dihedral_deg)
+        self.angle0 = None if angles is None else np.minimum(angles, min_dihedral_deg)
+
+    def bad(self, points, elements=None, which=None):
+        """Whether each element (``elements``, default all; ``which`` their indices in the
+        mesh) with vertices at ``points`` breaks the rule."""
+        el = self.elements if elements is None else elements
+        which = slice(None) if which is None else which
+        bad = element_measures(points, el) < MIN_AREA_RATIO * self.measure0[which]
+        if self.angle0 is not None:
+            bad |= _min_angles(points, el, self.min_dihedral_deg) < self.angle0[which]
+        return bad
 
 
 def place_boundary_vertices(points, triangles, material, image, levels, *,
                             max_shift_fraction=DEFAULTS.subpixel_max_shift, smooth_px=0.0,
-                            step_px=0.1):
+                            step_px=0.1, spacing=None, min_dihedral_deg=0.0, edge_px=EDGE_PX):
     """Move each vertex between exactly two materials to the ISO-50 crossing of the gray.
 
-    For a vertex whose incident triangles hold exactly two materials a and b, the gray
-    (smoothed by a Gaussian of ``smooth_px``, interpolated bilinearly) is sampled every
-    ``step_px`` along the gradient direction through the vertex, up to
-    ``max_shift_fraction`` of its shortest incident edge either way; the vertex moves to
-    the crossing of ``(levels[a] + levels[b]) / 2`` nearest to it where the gray passes
-    from a's side to b's. Vertices with one or three or more materials, vertices on the
-    image border, and vertices with no crossing in reach stay. A move that would invert an
-    incident triangle or leave it with less than :data:`MIN_AREA_RATIO` of its area is
-    retried at half the shift (:data:`BACKTRACK_STEPS` times), then dropped; moves that
-    are each valid but together spoil a triangle are undone until none does. The labels
-    do not change.
+    For a vertex whose incident elements (triangles over a slice, or tetrahedra over a
+    volume) hold exactly two materials a and b, the gray (smoothed by a Gaussian of
+    ``smooth_px``, interpolated bilinearly, or trilinearly) is sampled every ``step_px``
+    along the gradient direction through the vertex, up to ``max_shift_fraction`` of its
+    shortest incident edge either way; the vertex moves to the crossing of
+    ``(levels[a] + levels[b]) / 2`` nearest to it where the gray passes from a's side to
+    b's, if within ``edge_px`` either side of it the gray reaches the lower and the upper
+    quarter of the contrast (:data:`EDGE_PX`). Vertices with one or three or more
+    materials, vertices on the image border (the box's faces), and vertices with no such
+    crossing in reach stay. A move that would invert
+    an incident element, leave it with less than :data:`MIN_AREA_RATIO` of its area
+    (volume), or (tetrahedra) make its smallest dihedral angle smaller than
+    ``min_dihedral_deg`` and its own is retried at half the shift
+    (:data:`BACKTRACK_STEPS` times), then dropped; moves that are each valid but together
+    spoil an element are undone until none does. The labels do not change.
 
     Parameters
     ----------
-    points : (n, 2) array_like
-        Vertices (x, y) = (col, row) in pixel units.
-    triangles : (m, 3) int array_like
-        Counter-clockwise triangles.
+    points : (n, 2) or (n, 3) array_like
+        Vertices: (x, y) = (col, row) in pixel units over a slice; (x, y, z) = (i, j, k)
+        index times ``spacing`` over a volume.
+    triangles : (m, 3) or (m, 4) int array_like
+        Positively oriented triangles (counter-clockwise) or tetrahedra.
     material : (m,) int array_like
-        Material per triangle, 0..K-1.
-    image : (rows, cols) array_like
-        The gray image the labels were found on.
+        Material per element, 0..K-1.
+    image : (rows, cols) or (nz, ny, nx) array_like
+        The gray image or volume the labels were found on.
     levels : (K,) array_like
         Each material's gray level in the image's units (NaN: its vertices stay).
     max_shift_fraction : float
         Largest move as a share of the vertex's shortest incident edge, in (0, 1).
     smooth_px : float
-        Gaussian smoothing of the image before sampling (0 = none), px.
+        Gaussian smoothing of the image before sampling (0 = none), px (voxels of the
+        finest axis).
     step_px : float
-        Sampling step along the gradient, px.
+        Sampling step along the gradient, px (voxels of the finest axis).
+    spacing : (3,) array_like, optional
+        Voxel size (sx, sy, sz) of a volume (default 1); slices are in pixel units.
+    min_dihedral_deg : float
+        Tetrahedra only: the dihedral angle a move may not take an element below (0 = no
+        check).
+    edge_px : float
+        Half-width of the step check, px (voxels of the finest axis; 0 = no check).
 
     Returns
     -------
-    moved : (n, 2) float64 ndarray
+    moved : (n, d) float64 ndarray
         The vertices, boundary vertices moved.
     n_moved : int
         How many moved.
@@ -107,7 +170,8 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
     InputError
         Shapes that do not match.
     ParameterError
-        ``max_shift_fraction`` outside (0, 1), negative ``smooth_px``, ``step_px`` <= 0.
+        ``max_shift_fraction`` outside (0, 1), negative ``smooth_px``, ``step_px`` <= 0,
+        a bad ``spacing``.
 
     References
     ----------
@@ -128,44 +192,51 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
     mat = np.asarray(material, np.int64)
     img = np.asarray(image, float)
     lv = np.asarray(levels, float).ravel()
-    if pts.ndim != 2 or pts.shape[1] != 2 or tri.ndim != 2 or tri.shape[1] != 3:
-        raise InputError(f"points (n, 2) and triangles (m, 3) expected, got {pts.shape} and {tri.shape}")
-    if mat.shape != (len(tri),) or img.ndim != 2:
-        raise InputError(f"material: one per triangle ({len(tri)}) and a 2D image expected, got "
-                         f"{mat.shape} and {img.shape}")
+    dim = pts.shape[1] if pts.ndim == 2 else 0
+    if dim not in (2, 3) or tri.ndim != 2 or tri.shape[1] != dim + 1:
+        raise InputError(f"points (n, 2) and triangles (m, 3), or points (n, 3) and tetrahedra "
+                         f"(m, 4) expected, got {pts.shape} and {tri.shape}")
+    if mat.shape != (len(tri),) or img.ndim != dim:
+        raise InputError(f"material: one per element ({len(tri)}) and a {dim}D image expected, "
+                         f"got {mat.shape} and {img.shape}")
     if len(tri) and (mat.min() < 0 or mat.max() >= len(lv)):
         raise InputError(f"material: values must index levels (0..{len(lv) - 1})")
     if not 0.0 < max_shift_fraction < 1.0:
         raise ParameterError(f"max_shift_fraction: {max_shift_fraction!r} is not in (0, 1)")
     if smooth_px < 0 or step_px <= 0:
         raise ParameterError(f"smooth_px >= 0 and step_px > 0 needed, got {smooth_px!r}, {step_px!r}")
+    sp = np.ones(dim) if spacing is None else np.asarray(spacing, float).ravel()
+    if sp.shape != (dim,) or not np.all(np.isfinite(sp) & (sp > 0)):
+        raise ParameterError(f"spacing: {dim} finite values > 0 expected, got {spacing!r}")
     moved = pts.copy()
     if len(tri) == 0 or len(lv) < 2:
         return moved, 0
     n = len(pts)
-    vt_v, vt_t = tri.ravel(), np.repeat(np.arange(len(tri)), 3)
     lo, hi, count = _vertex_materials(tri, mat, n)
-    xmin, ymin = pts.min(axis=0)
-    xmax, ymax = pts.max(axis=0)
-    border = (np.isclose(pts[:, 0], xmin) | np.isclose(pts[:, 0], xmax)
-              | np.isclose(pts[:, 1], ymin) | np.isclose(pts[:, 1], ymax))
+    border = (np.isclose(pts, pts.min(axis=0)) | np.isclose(pts, pts.max(axis=0))).any(axis=1)
     cand = np.flatnonzero((count == 2) & ~border)
     cand = cand[np.isfinite(lv[lo[cand]]) & np.isfinite(lv[hi[cand]]) & (lv[lo[cand]] != lv[hi[cand]])]
     if len(cand) == 0:
         return moved, 0
-    # shortest incident edge per vertex
-    e = triangle_edges(tri)[0]
-    elen = np.hypot(*(pts[e[:, 0]] - pts[e[:, 1]]).T)
+    # shortest incident edge per vertex (every edge of every element; repeats do not matter)
+    pairs = [(i, j) for i in range(dim + 1) for j in range(i + 1, dim + 1)]
+    e = np.concatenate([tri[:, list(ij)] for ij in pairs])
+    elen = functools.reduce(np.hypot, (pts[e[:, 0]] - pts[e[:, 1]]).T)
     shortest = np.full(n, np.inf)
     np.minimum.at(shortest, e[:, 0], elen)
     np.minimum.at(shortest, e[:, 1], elen)
-    smooth = gaussian_filter(img, smooth_px, mode="nearest") if smooth_px > 0 else img
-    gy, gx = np.gradient(smooth)
+    h = float(sp.min())
+    sigma = tuple(smooth_px * h / sp[::-1])  # per array axis: the same physical blur
+    smooth = gaussian_filter(img, sigma, mode="nearest") if smooth_px > 0 else img
+
+    def sample(values, xyz):  # (..., dim) physical points -> values, (bi/tri)linear
+        idx = xyz.reshape(-1, dim) / sp
+        return map_coordinates(values, idx[:, ::-1].T, order=1, mode="nearest").reshape(xyz.shape[:-1])
+
     p = pts[cand]
-    coords = [p[:, 1], p[:, 0]]
-    g = np.column_stack([map_coordinates(gx, coords, order=1, mode="nearest"),
-                         map_coordinates(gy, coords, order=1, mode="nearest")])
-    gnorm = np.hypot(g[:, 0], g[:, 1])
+    # the gradient at the vertices, one axis at a time (a volume's three are large)
+    g = np.column_stack([sample(np.gradient(smooth, sp[a], axis=dim - 1 - a), p) for a in range(dim)])
+    gnorm = functools.reduce(np.hypot, g.T)
     ok = gnorm > 0
     cand, p, g, gnorm = cand[ok], p[ok], g[ok], gnorm[ok]
     if len(cand) == 0:
@@ -174,24 +245,42 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
     # +direction: from a's gray towards b's
     direction = g / gnorm[:, None] * np.sign(lb - la)[:, None]
     reach = max_shift_fraction * shortest[cand]
-    n_steps = int(np.ceil(reach.max() / step_px))
-    s = np.linspace(-1.0, 1.0, 2 * n_steps + 1)[None, :] * reach[:, None]
-    qx = p[:, 0:1] + s * direction[:, 0:1]
-    qy = p[:, 1:2] + s * direction[:, 1:2]
-    prof = map_coordinates(smooth, [qy.ravel(), qx.ravel()], order=1, mode="nearest").reshape(s.shape)
-    f = (prof - 0.5 * (la + lb)[:, None]) * np.sign(lb - la)[:, None]
-    up = (f[:, :-1] <= 0) & (f[:, 1:] > 0)
-    denom = np.where(up, f[:, 1:] - f[:, :-1], 1.0)
-    s_cross = s[:, :-1] + (-f[:, :-1] / denom) * (s[:, 1:] - s[:, :-1])
-    s_cross = np.where(up, s_cross, np.inf)
-    best = np.argmin(np.abs(s_cross), axis=1)
-    shift = s_cross[np.arange(len(cand)), best]
+    step = step_px * h
+    n_steps = int(np.ceil(reach.max() / step))
+    unit = np.linspace(-1.0, 1.0, 2 * n_steps + 1)[None, :]
+    shift = np.empty(len(cand))
+    chunk = max(1, 4_000_000 // unit.size)  # profiles sampled in bounded chunks
+    for c0 in range(0, len(cand), chunk):
+        c = slice(c0, c0 + chunk)
+        s = unit * reach[c, None]
+        prof = sample(smooth, p[c, None, :] + s[:, :, None] * direction[c, None, :])
+        f = (prof - 0.5 * (la[c] + lb[c])[:, None]) * np.sign(lb[c] - la[c])[:, None]
+        up = (f[:, :-1] <= 0) & (f[:, 1:] > 0)
+        denom = np.where(up, f[:, 1:] - f[:, :-1], 1.0)
+        s_cross = s[:, :-1] + (-f[:, :-1] / denom) * (s[:, 1:] - s[:, :-1])
+        s_cross = np.where(up, s_cross, np.inf)
+        best = np.argmin(np.abs(s_cross), axis=1)
+        shift[c] = s_cross[np.arange(len(s_cross)), best]
     found = np.isfinite(shift)
+    if edge_px and found.any():
+        # a crossing counts only on a step (EDGE_PX)
+        at = np.flatnonzero(found)
+        t = np.linspace(-1.0, 1.0, 2 * int(np.ceil(edge_px / step_px)) + 1) * edge_px * h
+        chunk = max(1, 4_000_000 // t.size)
+        for c0 in range(0, len(at), chunk):
+            c = at[c0:c0 + chunk]
+            q = p[c] + shift[c, None] * direction[c]
+            prof = sample(smooth, q[:, None, :] + t[None, :, None] * direction[c, None, :])
+            f = (prof - 0.5 * (la[c] + lb[c])[:, None]) * np.sign(lb[c] - la[c])[:, None]
+            quarter = 0.25 * np.abs(lb[c] - la[c])
+            found[c] = ((f[:, t <= 0].min(axis=1) <= -quarter)
+                        & (f[:, t >= 0].max(axis=1) >= quarter))
     cand, direction, shift = cand[found], direction[found], shift[found]
     if len(cand) == 0:
         return moved, 0
-    # each vertex alone: no incident triangle inverted or squashed, else half the shift
-    area0 = triangle_areas(pts, tri)
+    # each vertex alone: no incident element inverted or squashed, else half the shift
+    quality = _Quality(pts, tri, min_dihedral_deg)
+    vt_v, vt_t = tri.ravel(), np.repeat(np.arange(len(tri)), dim + 1)
     inc_t = vt_t[np.argsort(vt_v, kind="stable")]
     starts = np.concatenate([[0], np.cumsum(np.bincount(vt_v, minlength=n))])
     accepted = np.zeros(len(cand), bool)
@@ -199,29 +288,29 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
         todo = np.flatnonzero(~accepted & (shift != 0))
         if len(todo) == 0:
             break
-        good = _moves_valid(pts, tri, area0, inc_t, starts, cand[todo],
+        good = _moves_valid(pts, tri, quality, inc_t, starts, cand[todo],
                             pts[cand[todo]] + shift[todo, None] * direction[todo])
         accepted[todo[good]] = True
         shift[todo[~good]] *= 0.5
     cand, new = cand[accepted], pts[cand[accepted]] + shift[accepted, None] * direction[accepted]
     moved[cand] = new
-    # together: undo the moves around any triangle the combination spoils
+    # together: undo the moves around any element the combination spoils
     active = np.ones(len(cand), bool)
     for _ in range(len(cand) + 1):
-        bad = triangle_areas(moved, tri) < MIN_AREA_RATIO * area0
+        bad = quality.bad(moved)
         if not bad.any():
             break
         spoiled = np.isin(cand, np.unique(tri[bad])) & active
-        if not spoiled.any():  # a triangle bad before any move: not ours to fix
+        if not spoiled.any():  # an element bad before any move: not ours to fix
             break
         moved[cand[spoiled]] = pts[cand[spoiled]]
         active &= ~spoiled
     return moved, int(active.sum())
 
 
-def _moves_valid(pts, tri, area0, inc_t, starts, verts, targets):
-    """For each vertex, whether moving it alone to its target keeps every incident triangle
-    positively oriented with at least MIN_AREA_RATIO of its area."""
+def _moves_valid(pts, tri, quality, inc_t, starts, verts, targets):
+    """For each vertex, whether moving it alone to its target keeps every incident element
+    within ``quality``'s rule (a :class:`_Quality`)."""
     counts = starts[verts + 1] - starts[verts]
     owner = np.repeat(np.arange(len(verts)), counts)
     offs = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
@@ -229,9 +318,9 @@ def _moves_valid(pts, tri, area0, inc_t, starts, verts, targets):
     p = pts[tri[t]].copy()
     slot = tri[t] == verts[owner][:, None]
     p[slot] = targets[owner]
-    area = triangle_areas(p.reshape(-1, 2), np.arange(3 * len(p)).reshape(-1, 3))
-    ok_t = area >= MIN_AREA_RATIO * area0[t]
-    return np.bincount(owner, ~ok_t, len(verts)) == 0
+    k = tri.shape[1]
+    bad_t = quality.bad(p.reshape(-1, pts.shape[1]), np.arange(k * len(p)).reshape(-1, k), t)
+    return np.bincount(owner, bad_t, len(verts)) == 0
 
 
 @dataclass
@@ -240,11 +329,12 @@ class MovedMesh:
 
     Attributes
     ----------
-    points : (n, 2) float64 ndarray
+    points : (n, 2) or (n, 3) float64 ndarray
     gray : (m,) float64 ndarray, measured again where a vertex moved
     material : (m,) int64 ndarray
     material_gray : (K,) ndarray or None
-        Each material's area-weighted mean gray, ascending (None without ``renumber``).
+        Each material's area- (volume-) weighted mean gray, ascending (None without
+        ``renumber``).
     n_moved : int
     """
 
@@ -256,13 +346,16 @@ class MovedMesh:
 
 
 def subpixel_mesh(image, points, triangles, gray, material,
-                  subpixel_max_shift=DEFAULTS.subpixel_max_shift, renumber=True):
+                  subpixel_max_shift=DEFAULTS.subpixel_max_shift, renumber=True, *,
+                  spacing=None, smooth_px=0.0, min_dihedral_deg=0.0, edge_px=EDGE_PX):
     """A segmented mesh with its boundary vertices at the ISO-50 crossings
-    (:func:`place_boundary_vertices`), each material's level from its triangles away from
-    the boundary (:func:`material_levels_of_mesh`), and the grays of the triangles around
-    a moved vertex measured again (:func:`ctseg.triangle_gray`). With ``renumber`` the
-    materials are numbered again by ascending mean gray (the moves change the means a
+    (:func:`place_boundary_vertices`), each material's level from its elements away from
+    the boundary (:func:`material_levels_of_mesh`), and the grays of the elements around
+    a moved vertex measured again (:func:`ctseg.triangle_gray`, or
+    :func:`ctseg.tetra_gray.tetra_gray`'s exact overlaps for tetrahedra over a volume). With ``renumber``
+    the materials are numbered again by ascending mean gray (the moves change the means a
     little: on a coarse mesh, their order); without, the numbers stay (given levels).
+    ``spacing``, ``smooth_px``, ``min_dihedral_deg`` and ``edge_px`` are passed on.
 
     Returns
     -------
@@ -285,16 +378,22 @@ def subpixel_mesh(image, points, triangles, gray, material,
     if len(tri) == 0:
         return MovedMesh(pts.copy(), new_gray, mat, np.zeros(0) if renumber else None, 0)
     n_mat = int(mat.max()) + 1
-    # vertices between materials: their triangles do not measure a material's level
+    # vertices between materials: their elements do not measure a material's level
     interior = ~(_vertex_materials(tri, mat, len(pts))[2] > 1)[tri].any(axis=1)
-    area = triangle_areas(pts, tri)
+    area = element_measures(pts, tri)
     levels = material_levels_of_mesh(new_gray, area, mat, interior, n_mat)
     moved, n_moved = place_boundary_vertices(pts, tri, mat, image, levels,
-                                             max_shift_fraction=subpixel_max_shift)
+                                             max_shift_fraction=subpixel_max_shift,
+                                             smooth_px=smooth_px, spacing=spacing,
+                                             min_dihedral_deg=min_dihedral_deg,
+                                             edge_px=edge_px)
     touched = np.any(moved[tri] != pts[tri], axis=(1, 2))
-    if touched.any():  # only triangles with a moved vertex change
-        new_gray[touched] = triangle_gray(image, moved, tri[touched])
+    if touched.any():  # only elements with a moved vertex change
+        new_gray[touched] = (triangle_gray(image, moved, tri[touched]) if pts.shape[1] == 2 else
+                             VoxelOverlaps(moved, tri[touched], np.shape(image),
+                                           (1.0, 1.0, 1.0) if spacing is None else spacing
+                                           ).tetra_mean(np.asarray(image, float)))
     mat_gray = None
     if renumber:
-        mat, mat_gray, _ = order_by_gray(mat, new_gray, triangle_areas(moved, tri))
+        mat, mat_gray, _ = order_by_gray(mat, new_gray, element_measures(moved, tri))
     return MovedMesh(moved, new_gray, mat, mat_gray, n_moved)

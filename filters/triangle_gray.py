@@ -11,7 +11,7 @@ from .base import CTSegAlgorithm
 from .convert import _add_cell_array, _field_array, _points, mesh_index_coordinates, polydata_to_arrays
 from .convert3d import grid_to_arrays
 from .density import image_input
-from .sites import box_points
+from .sites import add_box_points, box_points
 
 
 def tetra_box_coordinates(grid, tetrahedra, geometry, shape):
@@ -74,14 +74,17 @@ class MeshAndImageFilter(CTSegAlgorithm):
         if grid:
             _, tets, arrays = grid_to_arrays(mesh_in)
             box, tets = tetra_box_coordinates(mesh_in, tets, geom, arr.shape)
-            cells, fields = self._volume(np.asarray(arr, np.float64), geom.spacing, box, tets,
-                                         arrays)
+            cells, fields, *moved = self._volume(np.asarray(arr, np.float64), geom.spacing,
+                                                 box, tets, arrays)
         else:
             xyz, tri, arrays = polydata_to_arrays(mesh_in)
             cells, fields, *moved = self._slice(arr, geom, xyz, tri, arrays)
         out = vtkDataObject.GetData(out_info, 0)
         out.ShallowCopy(mesh_in)
-        if not grid and moved:  # new (x, y) index points of the slice
+        if grid and moved:  # new box coordinates of the volume's points, recorded exactly
+            out.SetPoints(_points(geom.to_world(moved[0] / np.asarray(geom.spacing, float))))
+            add_box_points(out, moved[0])
+        elif moved:  # new (x, y) index points of the slice
             ijk = np.column_stack([moved[0], np.zeros(len(moved[0]))])
             out.SetPoints(_points(geom.to_world(ijk)))
         for name, values in cells.items():
@@ -98,7 +101,8 @@ class MeshAndImageFilter(CTSegAlgorithm):
         raise NotImplementedError
 
     def _volume(self, volume, spacing, points, tetrahedra, arrays):
-        """The same for tetrahedra (box coordinates) over a volume."""
+        """The same for tetrahedra (box coordinates) over a volume; the moved points in box
+        coordinates."""
         raise NotImplementedError
 
 

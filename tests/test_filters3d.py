@@ -10,8 +10,8 @@ from vtkmodules.util import numpy_support
 from ctseg.errors import CTSegError
 from ctseg.filters import (CTSegmentFilter, CVTSitesFilter, DelaunayMeshFilter,
                            DelaunayTetraFilter, DensityMapFilter, GraphCutSegmentFilter,
-                           MaterialBoundaryFilter, TriangleGrayFilter, array_to_image,
-                           polydata_to_arrays)
+                           MaterialBoundaryFilter, SubpixelBoundaryFilter, TriangleGrayFilter,
+                           array_to_image, polydata_to_arrays)
 from ctseg.filters.convert3d import grid_to_arrays
 from ctseg.geometry import ImageGeometry
 from ctseg.params import resolve
@@ -112,11 +112,14 @@ def test_stage_chain_equals_the_composite_3d(tmp_path, volume, name):
     cut = GraphCutSegmentFilter()
     cut.SetInputConnection(0, gray.GetOutputPort())
     cut.SetInputConnection(1, reader.GetOutputPort())
+    sub = SubpixelBoundaryFilter()
+    sub.SetInputConnection(0, cut.GetOutputPort())
+    sub.SetInputConnection(1, reader.GetOutputPort())
     bnd = MaterialBoundaryFilter()
-    bnd.SetInputConnection(cut.GetOutputPort())
-    stages = (dens, sites, tets, gray, cut, bnd)
+    bnd.SetInputConnection(sub.GetOutputPort())
+    stages = (dens, sites, tets, gray, cut, sub, bnd)
     progress = _watch(*stages)
-    out = _round_trip(cut.GetOutputPort(), tmp_path / "tets.vtu")
+    out = _round_trip(sub.GetOutputPort(), tmp_path / "tets.vtu")
     faces_out = _round_trip(bnd.GetOutputPort(), tmp_path / "interfaces.vtp")
     for f in stages:
         assert f.last_error is None, (type(f).__name__, f.last_error)
@@ -160,6 +163,7 @@ def test_stage_chain_equals_the_composite_3d(tmp_path, volume, name):
                                rtol=1e-9)
     assert _field(out, "relabelled_for_manifold")[0] == \
         comp.result.diagnostics["relabelled_for_manifold"]
+    assert _field(out, "subpixel_moved")[0] == comp.result.diagnostics["subpixel_moved"] > 0
     assert len(np.unique(arrays["material"])) == 4
     assert comp.result.diagnostics["relabelled_for_manifold"] > 0  # the repair ran
     assert comp.result.diagnostics["blur_px"] is not None  # and the blur correction

@@ -44,7 +44,7 @@ def test_each_filter_declares_its_stage_parameters():
         "density_floor", "density_saturation", "streak_sigma_px", "streak_margin_px",
         "streak_rounds", "streak_min_explained", "streak_model", "streak_min_gain"}
     assert set(SubpixelBoundaryFilter.PARAMETERS) == {"subpixel_boundary", "subpixel_max_shift",
-                                                      "gray_levels"}
+                                                      "gray_levels", "sliver_min_dihedral_deg"}
     assert set(GraphCutSegmentFilter.PARAMETERS) == _group("levels", "graphcut", "recursion") | {
         "density_floor", "density_saturation", "blur_correction", "blur_min_self_weight",
         "blur_max_px"}

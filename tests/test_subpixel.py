@@ -146,3 +146,127 @@ def test_subpixel_mesh_measures_levels_away_from_the_boundary():
     out = subpixel_mesh(img, mesh.points, mesh.triangles, gray, mat, renumber=False)
     assert out.n_moved > 0 and np.array_equal(out.material, mat) and out.material_gray is None
     np.testing.assert_allclose(out.gray, ctseg.triangle_gray(img, out.points, mesh.triangles))
+
+
+# ---------------------------------------------------------------------------- tetrahedra
+def _half_space_3d(shape, normal, offset, spacing, lo=20.0, hi=180.0, ss=4):
+    """Exact-ish voxel averages (ss^3 sub-samples) of the half-space n.x > offset, x the
+    physical point (i sx, j sy, k sz)."""
+    sub = (np.arange(ss) + 0.5) / ss - 0.5
+    axes = [((np.arange(n)[:, None] + sub[None, :]) * s).ravel()
+            for n, s in zip(shape, np.asarray(spacing, float)[::-1])]  # z, y, x
+    z, y, x = np.meshgrid(*axes, indexing="ij")
+    inside = normal[0] * x + normal[1] * y + normal[2] * z > offset
+    frac = inside.reshape(shape[0], ss, shape[1], ss, shape[2], ss).mean(axis=(1, 3, 5))
+    return lo + (hi - lo) * frac
+
+
+def _tetra_mesh(shape, spacing, n_sites, seed):
+    from ctseg.sites import random_sites_3d
+    from ctseg.stages3d import tetrahedra_3d
+
+    box = (np.array(shape[::-1], float) - 1.0) * spacing
+    corners = np.array([[x, y, z] for x in (0, box[0]) for y in (0, box[1]) for z in (0, box[2])])
+    sites = np.unique(np.vstack([corners, random_sites_3d(shape, n_sites, spacing, seed=seed)]), axis=0)
+    return tetrahedra_3d(sites, shape, None, spacing)[0]
+
+
+def _materials_per_vertex(elements, mat, n_points):
+    counts = np.zeros(n_points, int)
+    for j in np.unique(mat):
+        v = np.zeros(n_points, bool)
+        v[elements[mat == j].ravel()] = True
+        counts += v
+    return counts
+
+
+def test_vertices_land_on_a_tilted_plane_in_3d():
+    """Ground truth in 3D with anisotropic voxels: a tilted plane at a known position; the
+    vertices between its two sides move onto it, box vertices stay."""
+    from ctseg.tetra_gray import tetra_gray
+
+    sp = np.array([0.6, 0.8, 1.1])
+    shape = (16, 22, 26)
+    n = np.array([0.8, 0.36, 0.48])
+    n /= np.linalg.norm(n)
+    box = (np.array(shape[::-1]) - 1.0) * sp
+    offset = float(n @ box / 2 + 0.137)
+    img = _half_space_3d(shape, n, offset, sp)
+    mesh = _tetra_mesh(shape, sp, 900, seed=2)
+    mat = (tetra_gray(img, mesh.points, mesh.tetrahedra, sp) > 100.0).astype(np.int64)
+    moved, n_moved = place_boundary_vertices(mesh.points, mesh.tetrahedra, mat, img, [20.0, 180.0],
+                                             spacing=sp, min_dihedral_deg=5.0)
+    counts = _materials_per_vertex(mesh.tetrahedra, mat, len(mesh.points))
+    border = (np.isclose(mesh.points, 0) | np.isclose(mesh.points, box)).any(axis=1)
+    inner = (counts == 2) & ~border
+    went = np.any(moved != mesh.points, axis=1)
+    assert went.sum() == n_moved >= 20 and not went[~inner].any()
+    before = np.abs(mesh.points[went] @ n - offset) / sp.min()
+    after = np.abs(moved[went] @ n - offset) / sp.min()
+    # moves a tetrahedron's quality cut short (halved) stop part way
+    assert np.median(before) > 0.3 and np.median(after) < 0.1, after
+    assert np.mean(after) < 0.4 * np.mean(before) and np.mean(after < before) > 0.9
+    near = inner & (np.abs(mesh.points @ n - offset) < 0.4 * sp.min())
+    assert went[near].mean() > 0.8
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), n_sites=st.integers(10, 160), shift=st.floats(0.05, 0.95),
+       smooth=st.floats(0.0, 2.0), k=st.integers(2, 4), min_angle=st.sampled_from([0.0, 5.0, 12.0]))
+def test_no_tetrahedron_inverted_squashed_or_made_a_sliver(seed, n_sites, shift, smooth, k, min_angle):
+    """Any volume, any tetrahedra, any labels: every tetrahedron keeps MIN_AREA_RATIO of its
+    volume, positively oriented, and a smallest dihedral angle of at least
+    min(its own, min_dihedral_deg); vertices with one or three or more materials and box
+    vertices do not move."""
+    from ctseg.tetra_gray import tetra_gray
+    from ctseg.tetrahedra import dihedral_angles, tetra_volumes
+
+    rng = np.random.default_rng(seed)
+    shape = tuple(int(v) for v in rng.integers(4, 14, 3))
+    sp = rng.uniform(0.5, 1.5, 3)
+    img = gaussian_filter(rng.normal(0, 1, shape), 1.5) * 100 + rng.normal(0, 5, shape)
+    mesh = _tetra_mesh(shape, sp, min(n_sites, int(np.prod(shape)) - 8), seed)
+    gray = tetra_gray(img, mesh.points, mesh.tetrahedra, sp)
+    mat = np.digitize(gray, np.quantile(gray, np.linspace(0, 1, k + 1)[1:-1]))
+    levels = np.array([np.median(gray[mat == j]) if (mat == j).any() else np.nan for j in range(k)])
+    moved, n_moved = place_boundary_vertices(mesh.points, mesh.tetrahedra, mat, img, levels,
+                                             max_shift_fraction=shift, smooth_px=smooth,
+                                             spacing=sp, min_dihedral_deg=min_angle)
+    v0, v1 = tetra_volumes(mesh.points, mesh.tetrahedra), tetra_volumes(moved, mesh.tetrahedra)
+    assert np.all(v1 >= MIN_AREA_RATIO * v0 - 1e-12) and np.all(v1 > 0)
+    a0 = dihedral_angles(mesh.points, mesh.tetrahedra).min(axis=1)
+    a1 = dihedral_angles(moved, mesh.tetrahedra).min(axis=1)
+    went = np.any(moved != mesh.points, axis=1)
+    around = np.isin(np.arange(len(mesh.tetrahedra)),
+                     np.flatnonzero(np.isin(mesh.tetrahedra, np.flatnonzero(went)).any(axis=1)))
+    assert np.all(a1[around] >= np.minimum(a0[around], min_angle) - 1e-9)
+    box = (np.array(shape[::-1]) - 1.0) * sp
+    border = (np.isclose(mesh.points, 0) | np.isclose(mesh.points, box)).any(axis=1)
+    counts = _materials_per_vertex(mesh.tetrahedra, mat, len(mesh.points))
+    assert not went[(counts != 2) | border].any()
+    assert n_moved == int(went.sum())
+
+
+def test_volume_pipeline_moves_vertices_onto_a_sphere_and_keeps_labels():
+    """3D mode: the same tetrahedra and materials with and without the placement; only
+    interface vertices move, towards the analytic sphere; the surfaces stay closed and
+    enclose their tetrahedra's volume; the gray is measured again."""
+    from ctseg.phantoms3d import make_sphere_3d
+    from ctseg.tetra_gray import tetra_gray
+
+    ph = make_sphere_3d(28, radius=8.3, noise_sd=0.03)
+    off = ctseg.segment_volume(ph.image, mode="3d", subpixel_boundary=False)
+    on = ctseg.segment_volume(ph.image, mode="3d")
+    assert np.array_equal(on.tetrahedra, off.tetrahedra) and np.array_equal(on.material, off.material)
+    went = np.any(on.points != off.points, axis=1)
+    assert on.diagnostics["subpixel_moved"] == went.sum() > 20
+    assert set(np.flatnonzero(went)) <= set(np.unique(off.interfaces).tolist())
+    centre, radius = np.array(ph.features["centre"]), ph.features["radius"]
+    dist = lambda p: np.abs(np.linalg.norm(p - centre, axis=1) - radius)
+    iface = np.unique(on.interfaces)
+    assert dist(on.points[iface]).mean() < 0.7 * dist(off.points[iface]).mean()
+    assert on.diagnostics["element_quality"]["min_dihedral_deg"] >= 5.0 - 1e-9
+    for s in on.surfaces:
+        assert abs(s.enclosed_volume - s.element_volume) < 1e-9 * s.element_volume
+    np.testing.assert_allclose(on.gray, tetra_gray(ph.image.astype(float), on.points, on.tetrahedra),
+                               rtol=1e-9)

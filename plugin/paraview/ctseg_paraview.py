@@ -157,7 +157,7 @@ CTGraphCut = proxy(
     inputs=MESH_AND_IMAGE)
 CTSubpixelBoundary = proxy(
     SubpixelBoundaryFilter, "CTSubpixelBoundary", "CT Subpixel Boundary",
-    "The labelled triangles' boundary vertices moved to the ISO-50 crossing of the gray.",
+    "The labelled triangles' (tetrahedra's) boundary vertices moved to the ISO-50 crossing of the gray.",
     inputs=MESH_AND_IMAGE)
 CTMaterialBoundary = proxy(
     MaterialBoundaryFilter, "CTMaterialBoundary", "CT Material Boundary",
