@@ -26,7 +26,7 @@ from .pipeline import DENSITY_KEYS
 from .recursive_cut import order_by_gray, segment_triangles
 from .site_budget import site_budget_3d
 from .sites import initial_sites_3d
-from .subpixel import subpixel_mesh
+from .subpixel import EDGE_PX, subpixel_mesh
 from .surfaces import repair_pinched_edges
 from .tetra_gray import VoxelOverlaps
 from .tetrahedra import TetraMesh, face_graph, perturb_slivers, tetra_volumes
@@ -157,9 +157,10 @@ def subpixel_boundary_3d(image, mesh, gray, material, params=None, spacing=None,
                          renumber=True):
     """3D stage 8 (SPEC 10): the vertices between exactly two materials moved to the ISO-50
     crossing of the gray (:func:`ctseg.subpixel.subpixel_mesh` on the tetrahedra, moves of
-    at most ``subpixel_max_shift`` of the shortest incident edge), no tetrahedron inverted,
-    squashed below a fifth of its volume or turned into a sliver (smallest dihedral angle
-    below ``sliver_min_dihedral_deg`` and its own); the labels stay.
+    at most ``subpixel_max_shift`` of the shortest incident edge, crossings on a step only:
+    :data:`ctseg.subpixel.EDGE_PX`), no tetrahedron inverted, squashed below a fifth of its
+    volume or turned into a sliver (smallest dihedral angle below
+    ``sliver_min_dihedral_deg`` and its own); the labels stay.
 
     Parameters
     ----------
@@ -194,7 +195,7 @@ def subpixel_boundary_3d(image, mesh, gray, material, params=None, spacing=None,
     p = resolve(params)
     return subpixel_mesh(image, mesh.points, mesh.tetrahedra, gray, material,
                          p.subpixel_max_shift, renumber, spacing=_spacing(spacing),
-                         min_dihedral_deg=p.sliver_min_dihedral_deg)
+                         min_dihedral_deg=p.sliver_min_dihedral_deg, edge_px=EDGE_PX)
 
 
 def tetra_mesh(points, tetrahedra):

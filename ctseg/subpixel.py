@@ -22,12 +22,14 @@ area (volume), or inverts it."""
 BACKTRACK_STEPS = 4
 """A refused move is retried at half the shift, this many times."""
 
-EDGE_PX = 1.5
-"""A crossing counts only where the gray, within this many pixels (voxels of the finest
-axis) either side of it along the gradient, reaches the outer quarters of the two levels'
-contrast: a real step between the two materials, not a plateau of a third gray near the
-half-way (a thin layer of a material the labels missed, whose gray lies near the ISO-50
-of its neighbours: there the crossing wanders through the layer with the noise)."""
+EDGE_PX = 2.0
+"""The 3D mode's step check: a crossing counts only where the gray, within this many
+voxels either side of it, comes within :data:`EDGE_SHARE` of the contrast of each level:
+not a missed thin layer whose gray lies near the half-way, nor a feature too thin to reach
+its level, whose ISO-50 lies inside it (README, Method: why 3D only)."""
+
+EDGE_SHARE = 0.1
+"""See :data:`EDGE_PX`."""
 
 
 def material_levels_of_mesh(gray, area, material, interior, n_materials):
@@ -79,24 +81,18 @@ def element_measures(points, elements):
             else tetra_volumes(points, elements))
 
 
-def _min_angles(points, elements, min_dihedral_deg):
-    """Smallest dihedral angle of each tetrahedron, or None where no angle is checked
-    (triangles, or ``min_dihedral_deg`` 0)."""
-    if points.shape[1] == 2 or not min_dihedral_deg:
-        return None
-    return dihedral_angles(points, elements).min(axis=1)
-
-
 class _Quality:
     """What a move must keep of each element: at least :data:`MIN_AREA_RATIO` of its
-    measure, and (tetrahedra) a smallest dihedral angle of at least ``min_dihedral_deg``
-    or, for an element already below it, of its own."""
+    measure, and (tetrahedra, ``min_dihedral_deg`` > 0) a smallest dihedral angle of at
+    least ``min_dihedral_deg`` or, for an element already below it, of its own."""
 
     def __init__(self, points, elements, min_dihedral_deg):
-        self.elements, self.min_dihedral_deg = elements, min_dihedral_deg
+        self.elements = elements
         self.measure0 = element_measures(points, elements)
-        angles = _min_angles(points, elements, min_dihedral_deg)
-        self.angle0 = None if angles is None else np.minimum(angles, min_dihedral_deg)
+        self.angle0 = None
+        if points.shape[1] == 3 and min_dihedral_deg:
+            self.angle0 = np.minimum(dihedral_angles(points, elements).min(axis=1),
+                                     min_dihedral_deg)
 
     def bad(self, points, elements=None, which=None):
         """Whether each element (``elements``, default all; ``which`` their indices in the
@@ -105,13 +101,13 @@ class _Quality:
         which = slice(None) if which is None else which
         bad = element_measures(points, el) < MIN_AREA_RATIO * self.measure0[which]
         if self.angle0 is not None:
-            bad |= _min_angles(points, el, self.min_dihedral_deg) < self.angle0[which]
+            bad |= dihedral_angles(points, el).min(axis=1) < self.angle0[which]
         return bad
 
 
 def place_boundary_vertices(points, triangles, material, image, levels, *,
                             max_shift_fraction=DEFAULTS.subpixel_max_shift, smooth_px=0.0,
-                            step_px=0.1, spacing=None, min_dihedral_deg=0.0, edge_px=EDGE_PX):
+                            step_px=0.1, spacing=None, min_dihedral_deg=0.0, edge_px=0.0):
     """Move each vertex between exactly two materials to the ISO-50 crossing of the gray.
 
     For a vertex whose incident elements (triangles over a slice, or tetrahedra over a
@@ -120,10 +116,10 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
     along the gradient direction through the vertex, up to ``max_shift_fraction`` of its
     shortest incident edge either way; the vertex moves to the crossing of
     ``(levels[a] + levels[b]) / 2`` nearest to it where the gray passes from a's side to
-    b's, if within ``edge_px`` either side of it the gray reaches the lower and the upper
-    quarter of the contrast (:data:`EDGE_PX`). Vertices with one or three or more
-    materials, vertices on the image border (the box's faces), and vertices with no such
-    crossing in reach stay. A move that would invert
+    b's; with ``edge_px`` > 0, only if within ``edge_px`` either side of it the gray comes
+    within :data:`EDGE_SHARE` of the contrast of each level (the 3D mode's step check,
+    :data:`EDGE_PX`). Vertices with one or three or more materials, vertices on the image
+    border (the box's faces), and vertices with no such crossing in reach stay. A move that would invert
     an incident element, leave it with less than :data:`MIN_AREA_RATIO` of its area
     (volume), or (tetrahedra) make its smallest dihedral angle smaller than
     ``min_dihedral_deg`` and its own is retried at half the shift
@@ -156,7 +152,8 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
         Tetrahedra only: the dihedral angle a move may not take an element below (0 = no
         check).
     edge_px : float
-        Half-width of the step check, px (voxels of the finest axis; 0 = no check).
+        Half-width of the step check, px (voxels of the finest axis; 0 = no check, the
+        slices mode's choice).
 
     Returns
     -------
@@ -272,9 +269,9 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
             q = p[c] + shift[c, None] * direction[c]
             prof = sample(smooth, q[:, None, :] + t[None, :, None] * direction[c, None, :])
             f = (prof - 0.5 * (la[c] + lb[c])[:, None]) * np.sign(lb[c] - la[c])[:, None]
-            quarter = 0.25 * np.abs(lb[c] - la[c])
-            found[c] = ((f[:, t <= 0].min(axis=1) <= -quarter)
-                        & (f[:, t >= 0].max(axis=1) >= quarter))
+            reach_level = (0.5 - EDGE_SHARE) * np.abs(lb[c] - la[c])
+            found[c] = ((f[:, t <= 0].min(axis=1) <= -reach_level)
+                        & (f[:, t >= 0].max(axis=1) >= reach_level))
     cand, direction, shift = cand[found], direction[found], shift[found]
     if len(cand) == 0:
         return moved, 0
@@ -347,7 +344,7 @@ class MovedMesh:
 
 def subpixel_mesh(image, points, triangles, gray, material,
                   subpixel_max_shift=DEFAULTS.subpixel_max_shift, renumber=True, *,
-                  spacing=None, smooth_px=0.0, min_dihedral_deg=0.0, edge_px=EDGE_PX):
+                  spacing=None, smooth_px=0.0, min_dihedral_deg=0.0, edge_px=0.0):
     """A segmented mesh with its boundary vertices at the ISO-50 crossings
     (:func:`place_boundary_vertices`), each material's level from its elements away from
     the boundary (:func:`material_levels_of_mesh`), and the grays of the elements around

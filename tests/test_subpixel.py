@@ -210,6 +210,29 @@ def test_vertices_land_on_a_tilted_plane_in_3d():
     assert went[near].mean() > 0.8
 
 
+def test_3d_step_check_leaves_features_too_thin_to_reach_their_level():
+    """A plate 2 voxels thick, blurred until its gray peaks at about 70% of the contrast:
+    its ISO-50 lies inside it, so without the step check its vertices move in (the plate
+    thins); with it (the 3D mode's EDGE_PX, EDGE_SHARE) none moves. A thick slab of the
+    same material, same blur: its vertices move with and without."""
+    from ctseg.subpixel import EDGE_PX
+    from ctseg.tetra_gray import tetra_gray
+
+    sp = np.ones(3)
+    shape = (14, 16, 40)
+    for x0, x1, expect_moves in ((18.3, 20.3, False), (14.3, 26.3, True)):
+        img = gaussian_filter(_half_space_3d(shape, np.array([1.0, 0, 0]), x0, sp, 0.0, 100.0)
+                              - _half_space_3d(shape, np.array([1.0, 0, 0]), x1, sp, 0.0, 100.0), 1.0)
+        assert (55.0 < img.max() < 85.0) == (not expect_moves)
+        mesh = _tetra_mesh(shape, sp, 700, seed=5)
+        mat = (tetra_gray(img, mesh.points, mesh.tetrahedra) > 25.0).astype(np.int64)
+        _, free = place_boundary_vertices(mesh.points, mesh.tetrahedra, mat, img, [0.0, 100.0])
+        _, checked = place_boundary_vertices(mesh.points, mesh.tetrahedra, mat, img, [0.0, 100.0],
+                                             edge_px=EDGE_PX)
+        assert free > 5
+        assert (checked > 0.5 * free) if expect_moves else checked == 0, (free, checked)
+
+
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 10_000), n_sites=st.integers(10, 160), shift=st.floats(0.05, 0.95),
        smooth=st.floats(0.0, 2.0), k=st.integers(2, 4), min_angle=st.sampled_from([0.0, 5.0, 12.0]))
