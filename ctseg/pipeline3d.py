@@ -176,8 +176,8 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     material, mat_gray = labels.material, labels.material_gray
     n_moved = 0
     if p.subpixel_boundary:  # the labels stay; the mesh's vertices move
-        moved = timed("subpixel_boundary", 0.92, subpixel_boundary_3d, image, mesh, gray,
-                      material, p, sp, renumber=p.gray_levels == AUTO)
+        moved = timed("subpixel_boundary", 0.92, subpixel_boundary_3d, image, mesh.points,
+                      mesh.tetrahedra, gray, material, p, sp, renumber=p.gray_levels == AUTO)
         mesh = replace(mesh, points=moved.points)
         gray, material, n_moved = moved.gray, moved.material, moved.n_moved
         if moved.material_gray is not None:

@@ -153,7 +153,7 @@ def tetrahedra_3d(sites, shape, params=None, spacing=None):
     return mesh, slivers
 
 
-def subpixel_boundary_3d(image, mesh, gray, material, params=None, spacing=None,
+def subpixel_boundary_3d(image, points, tetrahedra, gray, material, params=None, spacing=None,
                          renumber=True):
     """3D stage 8 (SPEC 10): the vertices between exactly two materials moved to the ISO-50
     crossing of the gray (:func:`ctseg.subpixel.subpixel_mesh` on the tetrahedra, moves of
@@ -166,7 +166,9 @@ def subpixel_boundary_3d(image, mesh, gray, material, params=None, spacing=None,
     ----------
     image : (nz, ny, nx) ndarray
         The volume the mesh was labelled on (after any streak correction).
-    mesh : ctseg.tetrahedra.TetraMesh
+    points : (n, 3) ndarray
+        Physical box coordinates (a :class:`ctseg.tetrahedra.TetraMesh`'s).
+    tetrahedra : (m, 4) int ndarray
     gray, material : (m,) array_like
         From :func:`label_tetrahedra` (input units; 0..K-1).
     params, spacing
@@ -187,13 +189,13 @@ def subpixel_boundary_3d(image, mesh, gray, material, params=None, spacing=None,
     >>> from ctseg.tetra_gray import tetra_gray
     >>> cx = mesh.points[mesh.tetrahedra].mean(axis=1)[:, 0]
     >>> gray = tetra_gray(vol, mesh.points, mesh.tetrahedra)
-    >>> out = subpixel_boundary_3d(vol, mesh, gray, (cx > 5).astype(int))
+    >>> out = subpixel_boundary_3d(vol, mesh.points, mesh.tetrahedra, gray, (cx > 5).astype(int))
     >>> centre = np.argmin(np.abs(mesh.points - [5.0, 5.5, 5.5]).sum(axis=1))
     >>> out.n_moved, round(float(out.points[centre, 0]), 1)  # the edge is at x = 5.5
     (1, 5.5)
     """
     p = resolve(params)
-    return subpixel_mesh(image, mesh.points, mesh.tetrahedra, gray, material,
+    return subpixel_mesh(image, points, tetrahedra, gray, material,
                          p.subpixel_max_shift, renumber, spacing=_spacing(spacing),
                          min_dihedral_deg=p.sliver_min_dihedral_deg, edge_px=EDGE_PX)
 

@@ -119,9 +119,9 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
     b's; with ``edge_px`` > 0, only if within ``edge_px`` either side of it the gray comes
     within :data:`EDGE_SHARE` of the contrast of each level (the 3D mode's step check,
     :data:`EDGE_PX`). Vertices with one or three or more materials, vertices on the image
-    border (the box's faces), and vertices with no such crossing in reach stay. A move that would invert
-    an incident element, leave it with less than :data:`MIN_AREA_RATIO` of its area
-    (volume), or (tetrahedra) make its smallest dihedral angle smaller than
+    border (the box's faces), and vertices with no such crossing in reach stay. A move
+    that would invert an incident element, leave it with less than :data:`MIN_AREA_RATIO`
+    of its area (volume), or (tetrahedra) make its smallest dihedral angle smaller than
     ``min_dihedral_deg`` and its own is retried at half the shift
     (:data:`BACKTRACK_STEPS` times), then dropped; moves that are each valid but together
     spoil an element are undone until none does. The labels do not change.
@@ -348,10 +348,10 @@ def subpixel_mesh(image, points, triangles, gray, material,
     """A segmented mesh with its boundary vertices at the ISO-50 crossings
     (:func:`place_boundary_vertices`), each material's level from its elements away from
     the boundary (:func:`material_levels_of_mesh`), and the grays of the elements around
-    a moved vertex measured again (:func:`ctseg.triangle_gray`, or
-    :func:`ctseg.tetra_gray.tetra_gray`'s exact overlaps for tetrahedra over a volume). With ``renumber``
-    the materials are numbered again by ascending mean gray (the moves change the means a
-    little: on a coarse mesh, their order); without, the numbers stay (given levels).
+    a moved vertex measured again (:func:`ctseg.triangle_gray`, or the exact voxel
+    overlaps of :func:`ctseg.tetra_gray.tetra_gray` for tetrahedra over a volume). With
+    ``renumber`` the materials are numbered again by ascending mean gray (the moves change
+    the means a little: on a coarse mesh, their order); without, the numbers stay.
     ``spacing``, ``smooth_px``, ``min_dihedral_deg`` and ``edge_px`` are passed on.
 
     Returns

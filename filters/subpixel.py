@@ -2,7 +2,7 @@
 the mesh with its boundary vertices at the ISO-50 crossings (SPEC 10)."""
 from ctseg.errors import InputError
 from ctseg.params import AUTO
-from ctseg.stages3d import subpixel_boundary_3d, tetra_mesh
+from ctseg.stages3d import subpixel_boundary_3d
 from ctseg.subpixel import subpixel_mesh
 
 from .convert import mesh_index_coordinates
@@ -41,7 +41,7 @@ class SubpixelBoundaryFilter(MeshAndImageFilter):
         _check_labelled(arrays)
         if not self.params.subpixel_boundary:
             return {}, {"subpixel_moved": 0.0}
-        out = subpixel_boundary_3d(volume, tetra_mesh(points, tetrahedra), arrays["gray"],
+        out = subpixel_boundary_3d(volume, points, tetrahedra, arrays["gray"],
                                    arrays["material"], self.params, spacing,
                                    renumber=self.params.gray_levels == AUTO)
         return self._moved(out)
