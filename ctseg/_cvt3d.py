@@ -185,6 +185,23 @@ def _region_sums_3d(labels, w, n, nz, ny, nx, sx, sy, sz, centre):
 
 
 @njit(cache=True)
+def _feature_sums_3d(idx, coords, labels, w, n):
+    """Per region, over the voxels ``idx`` of one box face or edge: the weight and the
+    weighted sums of the coordinates ``coords`` (summed in voxel order, as np.bincount
+    sums)."""
+    sums = np.zeros((4, n))
+    for t in range(idx.shape[0]):
+        v = idx[t]
+        r = labels[v]
+        wi = w[v]
+        sums[0, r] += wi
+        sums[1, r] += wi * coords[t, 0]
+        sums[2, r] += wi * coords[t, 1]
+        sums[3, r] += wi * coords[t, 2]
+    return sums
+
+
+@njit(cache=True)
 def _local_drift_3d(old_sites, drift, h, gx, gy, gz, reach):
     """Per grid cell: the largest drift among the sites that started within `reach` cells
     of it (Chebyshev)."""

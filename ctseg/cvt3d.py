@@ -6,7 +6,7 @@ from itertools import product
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ._cvt3d import _assign_3d, _reassign_3d, _region_sums_3d
+from ._cvt3d import _assign_3d, _feature_sums_3d, _reassign_3d, _region_sums_3d
 from ._validate import check_spacing
 from .errors import InputError, ParameterError
 from .params import DEFAULTS, check
@@ -93,11 +93,9 @@ def _barycentres(features, labels, w, n):
     its voxels there (n, 3), exactly on the feature's plane or line."""
     result = []
     for idx, coords, fixed, values in features:
-        lab = labels[idx]
-        wl = w[idx]
-        bw = np.bincount(lab, wl, n)
-        safe = np.where(bw > 0, bw, 1.0)
-        bary = np.column_stack([np.bincount(lab, wl * coords[:, a], n) / safe for a in range(3)])
+        sums = _feature_sums_3d(idx, coords, labels, w, n)
+        bw = sums[0]
+        bary = (sums[1:4] / np.where(bw > 0, bw, 1.0)).T
         for b, v in zip(fixed, values):
             bary[:, b] = v
         result.append((bw, bary))
@@ -173,7 +171,8 @@ def _start(sites, labels_of, hi, feats, w):
 
 def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
                  max_iter=DEFAULTS.max_iter, progress=None,
-                 energy_rtol_3d=DEFAULTS.energy_rtol_3d):
+                 energy_rtol_3d=DEFAULTS.energy_rtol_3d,
+                 overrelaxation_3d=DEFAULTS.overrelaxation_3d):
     """Lloyd iterations of the voxel CVT, in physical units, with box-keeping site classes.
 
     Each voxel belongs to the region of its nearest site (physical Euclidean distance from
@@ -188,7 +187,11 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
       not raise its region's energy ``W |x - m|^2`` above the current site's, else to the
       constrained minimiser, the region's centroid m projected onto the line or plane and
       clipped into it;
-    - free: the rho-weighted centroid of its region (eq. 5).
+    - free: from ``s`` to ``s + w (m - s)``, m the rho-weighted centroid of its region
+      (eq. 5 when ``w = overrelaxation_3d`` is 1), or to m where that point would leave
+      the box. With the regions fixed a region's energy is ``W |x - m|^2`` plus a
+      constant, which this step multiplies by ``(1 - w)^2 <= 1`` for ``1 <= w < 2``; the
+      new regions only lower it further.
 
     Before the first iteration, after the corners are pinned, a starting site that lies
     on an edge line (else a face plane) whose interior voxels its region holds becomes
@@ -221,6 +224,8 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
         Also stop when an iteration lowers the energy by less than this share of it (the
         energy of a voxel CVT flattens long before the sites stop moving by ``tol_px``);
         0 turns this off.
+    overrelaxation_3d : float, optional
+        The free sites' step factor ``w``, in [1, 2).
     max_iter : int, optional
         Iteration cap.
     progress : callable, optional
@@ -248,6 +253,7 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
     """
     rho, sites, sp, hi, tol_px, max_iter = _check(rho, sites, spacing, tol_px, max_iter)
     energy_rtol = check("energy_rtol_3d", energy_rtol_3d)
+    omega = check("overrelaxation_3d", overrelaxation_3d)
     nz, ny, nx = rho.shape
     sx, sy, sz = (float(v) for v in sp)
     w = np.ascontiguousarray(rho.ravel())
@@ -280,6 +286,9 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
         empty_total += int(empty.sum())
         m = centre + sums[1:4].T / np.where(empty, 1.0, sums[0])[:, None]
         new = np.where(empty[:, None], sites, m)  # free: eq. 5; an empty region stays
+        if omega != 1.0:  # over-relaxed; a step that would leave the box stays Lloyd's
+            over = sites + omega * (new - sites)
+            new = np.where(np.all((over >= 0) & (over <= hi), axis=1)[:, None], over, new)
         for kind in (FACE, EDGE):
             bary = _barycentres(feats[kind], labels, w, n)
             for f, ((_, _, fixed, values), (bw, b)) in enumerate(zip(feats[kind], bary)):

@@ -131,7 +131,8 @@ def cvt_sites_3d(rho, params=None, spacing=None, *, n_sites=None, progress=None,
     sites0 = run("initial_sites", 0.1, initial_sites_3d, rho, n_sites, sp, init=p.init,
                  seed=p.seed, ward_block_px=p.ward_block_px)
     return run("cvt", 0.2, lloyd_cvt_3d, rho, sites0, sp, tol_px=p.tol_px,
-               max_iter=p.max_iter, progress=progress, energy_rtol_3d=p.energy_rtol_3d)
+               max_iter=p.max_iter, progress=progress, energy_rtol_3d=p.energy_rtol_3d,
+               overrelaxation_3d=p.overrelaxation_3d)
 
 
 def tetrahedra_3d(sites, shape, params=None, spacing=None):

@@ -225,6 +225,29 @@ def test_energy_tolerance_stops_where_the_energy_flattens():
     np.testing.assert_allclose(early.energy, e[:first + 1], rtol=1e-12)
 
 
+@pytest.mark.parametrize("name", ["aniso", "random"])
+def test_overrelaxed_step_is_w_times_lloyds(name):
+    """A free site moves w times Lloyd's step, or Lloyd's step where that would leave the
+    box; the energy still never increases, up to w near 2."""
+    make, sp, n, init = CASES[name]
+    rho = density_volume(make(), sp)
+    start = initial_sites_3d(rho, n, sp, init=init, seed=1)
+    one = {w: lloyd_cvt_3d(rho, start, sp, max_iter=1, overrelaxation_3d=w) for w in (1.0, 1.9)}
+    free = np.flatnonzero(one[1.0].site_class[:n] == 0)
+    assert len(one[1.9].sites) == len(one[1.0].sites) and len(free) > 0.5 * n
+    lloyd = one[1.0].sites[free] - start[free]
+    over = one[1.9].sites[free] - start[free]
+    hi = (np.array(rho.shape[::-1]) - 1) * np.array(sp)
+    inside = np.all((start[free] + 1.9 * lloyd >= 0) & (start[free] + 1.9 * lloyd <= hi), axis=1)
+    assert inside.sum() > 0.5 * len(free)
+    np.testing.assert_allclose(over[inside], 1.9 * lloyd[inside], atol=1e-9)
+    np.testing.assert_allclose(over[~inside], lloyd[~inside], atol=1e-9)
+    for w in (1.0, 1.5, 1.95):
+        e = np.array(lloyd_cvt_3d(rho, start, sp, max_iter=40, energy_rtol_3d=0.0,
+                                  overrelaxation_3d=w).energy)
+        assert np.all(np.diff(e) <= 1e-9 * e[0]) and e[-1] < e[0]
+
+
 @pytest.mark.parametrize("name", list(CASES))
 def test_regions_are_nearest_sites(runs, name):
     rho, sp, r = runs[name]
