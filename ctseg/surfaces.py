@@ -9,7 +9,7 @@ from .graph import connected_pieces, neighbour_lists
 from .tetrahedra import tetra_volumes
 
 MAX_RELABEL_ROUNDS = 50
-"""Rounds of the edge rule of :func:`repair_pinched_edges` before giving up."""
+"""Rounds of the edge rule of :func:`repair_pinched_edges` before its last resort."""
 
 
 @dataclass
@@ -215,7 +215,10 @@ def repair_pinched_edges(mesh, material, volume):
     is tried with each material of its face neighbours, and the move that removes the most
     pinched edges among its six (ties: the smallest tetrahedron) is made; if none removes
     any, all tetrahedra around the edge take the material holding most of their volume.
-    Repeated until no pinched edge is left.
+    Repeated until no pinched edge is left. Those moves can cycle; after
+    :data:`MAX_RELABEL_ROUNDS` passes, all tetrahedra around a pinched edge take the
+    highest material number among them. Each such move raises the sum of the material
+    numbers (a pinched edge has two materials around it), so the repair always ends.
 
     Parameters
     ----------
@@ -230,11 +233,6 @@ def repair_pinched_edges(mesh, material, volume):
         A changed copy.
     relabelled : int
         How many tetrahedra changed material.
-
-    Raises
-    ------
-    MeshCheckError
-        Pinched edges left after :data:`MAX_RELABEL_ROUNDS` passes.
     """
     mat = np.array(material, np.int64)
     vol = np.asarray(volume, float)
@@ -278,5 +276,13 @@ def repair_pinched_edges(mesh, material, volume):
                 for t in around:
                     touched.update(edges_of(t))
         todo = sorted(e for e in touched | set(todo) if stars.pinched(e[0], e[1], mat))
-    raise MeshCheckError(f"surfaces: pinched edges left after {MAX_RELABEL_ROUNDS} passes "
-                         "of relabelling")
+    while todo:  # the last resort: a move raises sum(mat), so the loop ends
+        touched = set()
+        for a, b in todo:
+            if stars.pinched(a, b, mat):
+                around = stars.around(a, b)
+                mat[around] = mat[around].max()
+                for t in around:
+                    touched.update(edges_of(t))
+        todo = sorted(e for e in touched if stars.pinched(e[0], e[1], mat))
+    return mat, int(np.sum(mat != before))

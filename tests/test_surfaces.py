@@ -87,6 +87,24 @@ def test_random_labellings_become_closed_manifolds(seed):
     assert_closed_manifolds(mesh, fixed)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_last_resort_raises_labels_and_ends_manifold(seed, monkeypatch):
+    """With the edge rule's passes spent (none here), each pinched edge's star takes its
+    highest material: labels only go up, and every surface ends closed and manifold."""
+    import ctseg.surfaces as surfaces
+    monkeypatch.setattr(surfaces, "MAX_RELABEL_ROUNDS", 0)
+    rng = np.random.default_rng(seed)
+    box = np.array([6.0, 5.0, 4.0])
+    corners = np.array([[x, y, z] for x in (0, box[0]) for y in (0, box[1]) for z in (0, box[2])])
+    mesh = delaunay_tetrahedra(np.vstack([corners, rng.uniform(0, 1, (700, 3)) * box]), box)
+    mat = rng.integers(0, 3, len(mesh.tetrahedra))
+    mat[rng.random(len(mat)) < 0.6] = 0  # sparse speckle of 1 and 2: pinches everywhere
+    assert sum(len(pinched_edges(mesh, mat, k)) for k in range(3)) > 0
+    fixed, changed = surfaces.repair_pinched_edges(mesh, mat, tetra_volumes(mesh.points, mesh.tetrahedra))
+    assert changed > 0 and np.all(fixed >= mat)
+    assert_closed_manifolds(mesh, fixed)
+
+
 def test_interfaces_are_the_surfaces_shared_faces():
     mesh, cube = cube_mesh(3)
     mat = np.where(cube[:, 0] < 1, 0, np.where(cube[:, 2] < 2, 1, 2))
