@@ -163,25 +163,35 @@ def _assign_3d(nz, ny, nx, sx, sy, sz, sites, labels, second, u, l2, l3):
                 l3[v] = _down(d3)
 
 
-@njit(cache=True)
+_SUM_SLABS = 4
+"""z-slabs of :func:`_region_sums_3d`, summed apart (in parallel) and then in order: a
+fixed count, so the sums do not depend on the thread count."""
+
+
+@njit(cache=True, parallel=True)
 def _region_sums_3d(labels, w, n, nz, ny, nx, sx, sy, sz, centre):
     """Per region: weight W, weighted sums of (p - centre) and Q = sum w |p - centre|^2."""
-    sums = np.zeros((5, n))
-    for k in range(nz):
-        dz = k * sz - centre[2]
-        for j in range(ny):
-            dy = j * sy - centre[1]
-            for i in range(nx):
-                v = (k * ny + j) * nx + i
-                r = labels[v]
-                wi = w[v]
-                dx = i * sx - centre[0]
-                sums[0, r] += wi
-                sums[1, r] += wi * dx
-                sums[2, r] += wi * dy
-                sums[3, r] += wi * dz
-                sums[4, r] += wi * (dx * dx + dy * dy + dz * dz)
-    return sums
+    part = np.zeros((_SUM_SLABS, 5, n))
+    for b in prange(_SUM_SLABS):
+        sums = part[b]
+        for k in range(b * nz // _SUM_SLABS, (b + 1) * nz // _SUM_SLABS):
+            dz = k * sz - centre[2]
+            for j in range(ny):
+                dy = j * sy - centre[1]
+                for i in range(nx):
+                    v = (k * ny + j) * nx + i
+                    r = labels[v]
+                    wi = w[v]
+                    dx = i * sx - centre[0]
+                    sums[0, r] += wi
+                    sums[1, r] += wi * dx
+                    sums[2, r] += wi * dy
+                    sums[3, r] += wi * dz
+                    sums[4, r] += wi * (dx * dx + dy * dy + dz * dz)
+    out = part[0].copy()
+    for b in range(1, _SUM_SLABS):
+        out += part[b]
+    return out
 
 
 @njit(cache=True)

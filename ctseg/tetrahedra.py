@@ -172,9 +172,14 @@ def delaunay_tetrahedra(sites, box):
             raise MeshCheckError(f"tetrahedra: {int(inside.sum())} flat tetrahedra inside the "
                                  "box (coplanar sites) after moving the sites")
         pts = _jitter(np.asarray(sites, float), box, size * 10 ** attempt, attempt)
-    tets, vol = tets[~flat], vol[~flat]
+    return _checked_mesh(pts, tets[~flat], vol[~flat], box)
+
+
+def _checked_mesh(pts, tets, vol, box):
+    """The TetraMesh of tetrahedra of volumes ``vol`` that must fill the box exactly and
+    use every site."""
     total = float(np.prod(box))
-    if abs(vol.sum() - total) > 1e-9 * total:
+    if vol.min(initial=0.0) < 0 or abs(vol.sum() - total) > 1e-9 * total:
         raise MeshCheckError(f"tetrahedra: they fill {vol.sum():.12g} of the box's "
                              f"{total:.12g} (a corner site missing?)")
     used = np.unique(tets)
@@ -220,8 +225,9 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
     Only the tetrahedra around the moved sites change: each round re-triangulates that
     cavity alone (:func:`ctseg._retet.local_delaunay`: the tetrahedra whose circumsphere
     holds a moved site, or that have one as a vertex), and all the sites only where that
-    patch fails its checks; the best sites are triangulated whole once at the end (the
-    same tetrahedra, in the order and orientation a whole triangulation gives them).
+    patch fails its checks. The result is checked as :func:`delaunay_tetrahedra` checks a
+    whole triangulation (exact cover of the box, every site a vertex), and triangulated
+    whole where it fails.
 
     Parameters
     ----------
@@ -277,11 +283,12 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
         if key < best_key:
             best_pts, best_tets, best_mesh, angle, best_key = pts, tets, mesh, a, key
     if best_mesh is None:
-        # the best sites triangulated whole once more: the same tetrahedra, in Qhull's
-        # order (so the mesh is the one a full triangulation every round gave), and checked
-        best_mesh = delaunay_tetrahedra(best_pts, box)
-        angle = dihedral_angles(best_mesh.points, best_mesh.tetrahedra).min(axis=1)
-        best_key = (int(np.sum(angle < min_dihedral_deg)),)
+        try:
+            best_mesh = _checked_mesh(best_pts, best_tets, tetra_volumes(best_pts, best_tets), box)
+        except MeshCheckError:  # a patch's round-off: the best sites triangulated whole
+            best_mesh = delaunay_tetrahedra(best_pts, box)
+            angle = dihedral_angles(best_mesh.points, best_mesh.tetrahedra).min(axis=1)
+            best_key = (int(np.sum(angle < min_dihedral_deg)),)
     return best_mesh.points, best_mesh, best_key[0]
 
 
