@@ -93,10 +93,10 @@ class CVTParams(_Group):
                            "smallest spacing)", "px", low=0.0, high=10.0, low_open=True, vtk="Tolerance")
     max_iter: int = _param(200, "int", "Lloyd iteration cap", low=1, high=100_000,
                            vtk="MaximumIterations")
-    energy_rtol_3d: float = _param(1e-5, "float", "the 3D Lloyd also stops when an iteration lowers the CVT "
+    energy_rtol_3d: float = _param(0.0, "float", "the 3D Lloyd also stops when an iteration lowers the CVT "
                                    "energy by less than this share of it (0 = off: only tol_px and max_iter)",
                                    low=0.0, high=1.0, vtk="EnergyTolerance3D")
-    overrelaxation_3d: float = _param(1.7, "float", "the 3D Lloyd moves a free site this many times the way to "
+    overrelaxation_3d: float = _param(1.0, "float", "the 3D Lloyd moves a free site this many times the way to "
                                       "its centroid (1 = Lloyd's step; below 2 the energy still never increases)",
                                       low=1.0, high=2.0, high_open=True, vtk="OverRelaxation3D")
 
