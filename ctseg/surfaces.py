@@ -247,42 +247,40 @@ def repair_pinched_edges(mesh, material, volume):
     def n_pinched(edges):
         return sum(stars.pinched(u, v, mat) for u, v in edges)
 
+    def edge_rule(around):
+        """The move for one pinched edge; returns the tetrahedra it relabelled."""
+        best = None
+        for t in around:
+            edges = edges_of(t)
+            old, was = mat[t], n_pinched(edges)
+            for m in set(mat[nb[nb_start[t]:nb_start[t + 1]]].tolist()) - {old}:
+                mat[t] = m
+                score = (n_pinched(edges) - was, vol[t], int(t), m)
+                mat[t] = old
+                best = score if best is None or score < best else best
+        if best is not None and best[0] < 0:
+            mat[best[2]] = best[3]
+            return [best[2]]
+        # no single tetrahedron helps: the whole star of the edge takes the material
+        # holding most of its volume
+        mat[around] = int(np.argmax(np.bincount(mat[around], vol[around])))
+        return around
+
     todo = sorted({tuple(e) for k in np.unique(mat) for e in pinched_edges(mesh, mat, k)})
-    for _ in range(MAX_RELABEL_ROUNDS):
-        if not todo:
-            return mat, int(np.sum(mat != before))
+    passes = 0
+    while todo:
         touched = set()
         for a, b in todo:
             if not stars.pinched(a, b, mat):
                 continue
             around = stars.around(a, b)
-            best = None
-            for t in around:
-                edges = edges_of(t)
-                old, was = mat[t], n_pinched(edges)
-                for m in set(mat[nb[nb_start[t]:nb_start[t + 1]]].tolist()) - {old}:
-                    mat[t] = m
-                    score = (n_pinched(edges) - was, vol[t], int(t), m)
-                    mat[t] = old
-                    best = score if best is None or score < best else best
-            if best is not None and best[0] < 0:
-                mat[best[2]] = best[3]
-                touched.update(edges_of(best[2]))
-            else:
-                # no single tetrahedron helps: the whole star of the edge takes the
-                # material holding most of its volume
-                share = np.bincount(mat[around], vol[around])
-                mat[around] = int(np.argmax(share))
-                for t in around:
-                    touched.update(edges_of(t))
-        todo = sorted(e for e in touched | set(todo) if stars.pinched(e[0], e[1], mat))
-    while todo:  # the last resort: a move raises sum(mat), so the loop ends
-        touched = set()
-        for a, b in todo:
-            if stars.pinched(a, b, mat):
-                around = stars.around(a, b)
+            if passes < MAX_RELABEL_ROUNDS:
+                changed = edge_rule(around)
+            else:  # the last resort: raises sum(mat), so the loop ends
                 mat[around] = mat[around].max()
-                for t in around:
-                    touched.update(edges_of(t))
-        todo = sorted(e for e in touched if stars.pinched(e[0], e[1], mat))
+                changed = around
+            for t in changed:
+                touched.update(edges_of(t))
+        todo = sorted(e for e in touched | set(todo) if stars.pinched(e[0], e[1], mat))
+        passes += 1
     return mat, int(np.sum(mat != before))

@@ -179,7 +179,9 @@ def _checked_mesh(pts, tets, vol, box):
     """The TetraMesh of tetrahedra of volumes ``vol`` that must fill the box exactly and
     use every site."""
     total = float(np.prod(box))
-    if vol.min(initial=0.0) < 0 or abs(vol.sum() - total) > 1e-9 * total:
+    if vol.min(initial=0.0) < 0:
+        raise MeshCheckError(f"tetrahedra: {int(np.sum(vol < 0))} negatively oriented")
+    if abs(vol.sum() - total) > 1e-9 * total:
         raise MeshCheckError(f"tetrahedra: they fill {vol.sum():.12g} of the box's "
                              f"{total:.12g} (a corner site missing?)")
     used = np.unique(tets)
