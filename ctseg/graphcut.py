@@ -37,8 +37,8 @@ def graphcut_capacities(gray, edges, centroids, seeds=None, theta_255=DEFAULTS.t
         Triangle gray values f(t) on the 0-255 scale.
     edges : (k, 2) int array_like
         Adjacent triangle pairs (indices into ``gray``).
-    centroids : (m, 2) array_like
-        Triangle barycentres (for d(tm, tn)).
+    centroids : (m, 2) or (m, 3) array_like
+        Element barycentres (for d(tm, tn), the Euclidean distance in 2D or 3D).
     seeds : (int, int), optional
         (s0, s1) triangles; default the lowest and highest f.
     theta_255 : float or 'auto', optional
@@ -93,7 +93,7 @@ def graphcut_capacities(gray, edges, centroids, seeds=None, theta_255=DEFAULTS.t
 
     c = np.asarray(centroids, dtype=np.float64)
     if len(edges):
-        d = np.hypot(*(c[edges[:, 0]] - c[edges[:, 1]]).T)
+        d = np.linalg.norm(c[edges[:, 0]] - c[edges[:, 1]], axis=1)
         dbar = d.mean()
         dist_term = d / (d + dbar) if dbar > 0 else np.zeros_like(d)
         w = lam * (1.0 / (np.abs(f[edges[:, 0]] - f[edges[:, 1]]) + eps) + beta * dist_term)

@@ -162,8 +162,8 @@ class GraphCutParams(_Group):
     theta_255: float = _param(AUTO, "float", "seed-set width; auto = 10% of the component's "
                               "gray range", "gray 0-255", low=0.0, high=255.0, low_open=True,
                               auto=True)
-    weight_by_edge_length: bool = _param(False, "bool", "multiply neighbour capacities by the "
-                                         "shared edge length (not the paper's)")
+    weight_by_edge_length: bool = _param(False, "bool", "multiply neighbour capacities by the shared "
+                                         "edge length, in 3D face area (px / voxel units; not the paper's)")
 
 
 @dataclass(frozen=True)

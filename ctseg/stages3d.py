@@ -326,6 +326,10 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
     cent = mesh.points[mesh.tetrahedra].mean(axis=1)
 
     cut = {k: getattr(p, k) for k in CUT_KEYS}
+    if p.weight_by_edge_length:  # the shared faces' areas, in voxel faces (as 2D's pixels)
+        a, b, c = (mesh.points[mesh.shared_faces[:, i]] for i in range(3))
+        area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        cut["edge_length"] = area / float(np.prod(sp)) ** (2.0 / 3.0)
     f255 = np.clip((gray - offset) * factor, 0.0, 255.0)
     levels, levels_report = checked_levels(levels, pixel_sigma, f255, volume_vox, p)
     # interior: most of the element's voxels are flat (the un-sharpened density below

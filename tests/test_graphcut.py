@@ -8,6 +8,48 @@ from ctseg.graphcut import graphcut_capacities, graphcut_split
 from oracles import cut_energy
 
 
+def spec6_energy(gray, edges, cent, labels, theta, lam=70.0, beta=0.286, eps=1.0):
+    """SPEC 6's cut value of a 0/1 labelling, from its formulas (not from the code's
+    capacities): infinite where a seed set is cut off its terminal."""
+    f = np.asarray(gray, float)
+    s0, s1 = int(np.argmin(f)), int(np.argmax(f))
+    d0, d1 = np.abs(f - f[s0]), np.abs(f - f[s1])
+    total = 0.0
+    for t, lab in enumerate(labels):
+        in0 = d0[t] <= theta or t == s0
+        in1 = (d1[t] <= theta and not in0) or t == s1
+        if (in0 and t != s1 and lab == 1) or (in1 and lab == 0):
+            return np.inf
+        if not (in0 or in1):  # label 0 cuts the link to s1, label 1 the link to s0
+            total += 1 - (d1[t] if lab == 0 else d0[t]) / (d0[t] + d1[t])
+    dist = [np.sqrt(sum((cent[a][k] - cent[b][k]) ** 2 for k in range(len(cent[a]))))
+            for a, b in edges]
+    dbar = np.mean(dist)
+    for (a, b), d in zip(edges, dist):
+        if labels[a] != labels[b]:
+            total += lam * (1 / (abs(f[a] - f[b]) + eps) + beta * d / (d + dbar))
+    return total
+
+
+def tetrahedron_graph(seed):
+    """A Delaunay tetrahedralisation of random points stretched along z, with 4 to 12
+    tetrahedra: (gray, face-sharing pairs, barycentres)."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    while True:
+        pts = rng.uniform(0, 1, (rng.integers(6, 9), 3)) * [2.0, 2.0, 12.0]
+        tets = Delaunay(pts).simplices
+        if 4 <= len(tets) <= 12:
+            break
+    faces = {}
+    for t, tet in enumerate(tets):
+        for drop in range(4):
+            faces.setdefault(tuple(sorted(np.delete(tet, drop))), []).append(t)
+    edges = np.array([f for f in faces.values() if len(f) == 2])
+    return rng.uniform(0, 255, len(tets)), edges, pts[tets].mean(axis=1)
+
+
 def random_graph(n, seed):
     rng = np.random.default_rng(seed)
     gray = rng.uniform(0, 255, n)
@@ -29,6 +71,17 @@ def test_min_cut_equals_brute_force_minimum(n, seed):
     assert np.isclose(cut_energy(caps, labels), best, rtol=1e-9, atol=1e-9)
     s0, s1 = caps.seeds
     assert labels[s0] == 0 and labels[s1] == 1  # source side is label 0
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_min_cut_on_tetrahedron_graphs_equals_spec6_enumeration(seed):
+    # the distance term in 3D: barycentres 3D, the z distances larger than x and y
+    gray, edges, cent = tetrahedron_graph(seed)
+    n = len(gray)
+    best = min(spec6_energy(gray, edges, cent, lab, 20.0) for lab in itertools.product([0, 1], repeat=n))
+    labels, flow = graphcut_split(gray, edges, cent, theta_255=20.0)
+    assert np.isclose(flow, best, rtol=1e-9)
+    assert np.isclose(spec6_energy(gray, edges, cent, labels, 20.0), best, rtol=1e-9)
 
 
 def test_capacities_follow_spec():

@@ -88,3 +88,26 @@ def test_a_constant_volume_is_one_material():
     seg = ctseg.segment_volume(np.full((6, 10, 10), 3.0), mode="3d", n_sites=80)
     assert seg.n_materials == 1 and len(seg.interfaces) == 0
     assert len(seg.surfaces) == 1 and seg.surfaces[0].enclosed_volume > 0
+
+
+def test_face_area_weighting_passes_the_shared_face_areas(monkeypatch):
+    # every tetrahedron's four faces count each shared face twice and each box face once
+    # (the vertices as labelled: no sub-voxel move after the cut)
+    import ctseg.stages3d as stages3d
+
+    seen = []
+    real = stages3d.segment_triangles
+    monkeypatch.setattr(stages3d, "segment_triangles",
+                        lambda *a, **kw: seen.append(kw["edge_length"]) or real(*a, **kw))
+    ph = make_volume(8, 24, seed=2)
+    spacing = np.array([0.2, 0.2, 0.5])
+    seg = ctseg.segment_volume(ph.image, mode="3d", spacing=spacing, n_sites=200,
+                               weight_by_edge_length=True, subpixel_boundary=False)
+    p = seg.points[seg.tetrahedra]
+    faces = [p[:, [1, 2, 3]], p[:, [0, 2, 3]], p[:, [0, 1, 3]], p[:, [0, 1, 2]]]
+    all_faces = sum(0.5 * np.linalg.norm(np.cross(f[:, 1] - f[:, 0], f[:, 2] - f[:, 0]), axis=1).sum()
+                    for f in faces)
+    x, y, z = (np.array(ph.image.shape[::-1]) - 1.0) * spacing
+    shared = (all_faces - 2 * (x * y + y * z + z * x)) / 2
+    assert seen and all(len(e) == len(seen[0]) for e in seen)
+    assert np.isclose(seen[0].sum() * np.prod(spacing) ** (2 / 3), shared, rtol=1e-9)
