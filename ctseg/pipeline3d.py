@@ -64,6 +64,32 @@ class TetraSegmentation:
         return len(self.material_gray)
 
 
+def check_shape_3d(shape, name="volume"):
+    """Refuse a shape the 3D mode cannot mesh: not 3D, or under 2 voxels along an axis, whose
+    name (numpy order z, y, x) the message gives with the slices mode that works.
+
+    Raises
+    ------
+    InputError
+
+    Example
+    -------
+    >>> check_shape_3d((6, 1, 14))  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ctseg.errors.InputError: volume: shape (6, 1, 14) has 1 voxel along y; ... --axis y)
+    """
+    shape = tuple(int(n) for n in shape)
+    if len(shape) != 3:
+        raise InputError(f"{name}: shape {shape}; 3D mode needs a volume of at least 2 voxels "
+                         "along every axis (one slice: use slices mode)")
+    if min(shape) < 2:
+        axis = "zyx"[int(np.argmin(shape))]
+        raise InputError(f"{name}: shape {shape} has {min(shape)} voxel along {axis}; 3D mode needs a "
+                         "volume of at least 2 voxels along every axis (slices across "
+                         f"{axis} work: axis='{axis}', CLI --axis {axis})")
+
+
 def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **overrides):
     """Segment a volume into tetrahedra with one material each, and closed surfaces.
 
@@ -135,9 +161,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     """
     p = resolve(params, **overrides)
     vol = as_volume(volume)
-    if min(vol.shape) < 2:
-        raise InputError(f"volume: shape {vol.shape}; 3D mode needs at least 2 voxels along "
-                         "every axis (a single slice is a 2D problem: use slices mode)")
+    check_shape_3d(vol.shape)
     sp = check_spacing((1.0, 1.0, 1.0) if spacing is None else spacing)
     report = progress or (lambda frac, stage: None)
     times, peaks = {}, {}

@@ -3,8 +3,6 @@ and write the outputs in its world geometry, measure against truth, draw the fig
 say what came out (the ``ctseg`` command's 3D mode; usable from any script)."""
 import os
 
-from ctseg.errors import InputError
-
 
 def segment_and_write_3d(image, geometry, params, output, surfaces=None, figure=None,
                          truth=None, progress=None, name="volume"):
@@ -38,29 +36,39 @@ def segment_and_write_3d(image, geometry, params, output, surfaces=None, figure=
     Raises
     ------
     InputError
-        Not a volume of at least 2 voxels along every axis.
+        Not a volume of at least 2 voxels along every axis
+        (:func:`ctseg.pipeline3d.check_shape_3d`). Any error once writing has begun removes
+        the files this call wrote before it is raised again.
     """
+    from ctseg.pipeline3d import check_shape_3d
     from ctseg.volume import segment_array
 
     from .figure3d import render_volume_figure
     from ctseg.metrics import evaluate_tetra
     from .writers3d import write_interfaces, write_tetra_mesh
 
-    if image.ndim != 3 or min(image.shape) < 2:
-        raise InputError(f"{name}: shape {image.shape}; 3D mode needs a volume of at least 2 "
-                         "voxels along every axis (one slice: use slices mode)")
+    check_shape_3d(image.shape, name)
     result = segment_array(image, params, spacing=geometry.spacing, progress=progress)
-    written, checks = write_tetra_mesh(result, output, geometry)
-    diag = dict(result.diagnostics, outputs=[os.path.abspath(w) for w in written],
-                mesh_checks=checks)
-    if surfaces:
-        write_interfaces(result, surfaces, geometry)
-        diag["surfaces_output"] = os.path.abspath(surfaces)
-    if truth is not None:
-        diag["accuracy"] = evaluate_tetra(result, truth)
-    if figure:
-        render_volume_figure(figure, image, result, title=os.path.basename(name.rstrip(os.sep)))
-        diag["figure"] = os.path.abspath(figure)
+    done = []  # all the outputs or none: a failure after the first removes those written
+    try:
+        written, checks = write_tetra_mesh(result, output, geometry)
+        done += written
+        diag = dict(result.diagnostics, outputs=[os.path.abspath(w) for w in written],
+                    mesh_checks=checks)
+        if surfaces:
+            write_interfaces(result, surfaces, geometry)
+            done.append(surfaces)
+            diag["surfaces_output"] = os.path.abspath(surfaces)
+        if truth is not None:
+            diag["accuracy"] = evaluate_tetra(result, truth)
+        if figure:
+            render_volume_figure(figure, image, result, title=os.path.basename(name.rstrip(os.sep)))
+            diag["figure"] = os.path.abspath(figure)
+    except BaseException:
+        for path in done:
+            if os.path.exists(path):
+                os.unlink(path)
+        raise
     return diag, written
 
 

@@ -156,8 +156,8 @@ def _vol(shape=(6, 12, 14)):
 
 @pytest.mark.parametrize("name,array,words", [
     ("one_slice", _vol()[:1], ["in.npy", "3D mode needs a volume", "2 voxels along every axis"]),
-    ("one_row", _vol()[:, :1, :], ["in.npy", "3D mode needs a volume"]),
-    ("one_column", _vol()[:, :, :1], ["in.npy", "3D mode needs a volume"]),
+    ("one_row", _vol()[:, :1, :], ["in.npy", "3D mode needs a volume", "along y", "--axis y"]),
+    ("one_column", _vol()[:, :, :1], ["in.npy", "3D mode needs a volume", "along x", "--axis x"]),
     ("nan", np.where(np.arange(6 * 12 * 12).reshape(6, 12, 12) == 100, np.nan, 1.0),
      ["NaN or infinite", "slice 0"]),
     ("inf", np.full((4, 8, 8), np.inf), ["NaN or infinite"]),
@@ -166,6 +166,29 @@ def test_refused_volumes(tmp_path, capsys, name, array, words):
     np.save(tmp_path / "in.npy", array)
     _refused(tmp_path, capsys, [tmp_path / "in.npy", "--mode", "3d", "-o", tmp_path / "m.vtu"],
              *words)
+
+
+def test_the_axis_the_thin_volume_message_names_works_in_slices_mode(tmp_path):
+    np.save(tmp_path / "in.npy", _vol()[:, :1, :])
+    assert main(["mesh", str(tmp_path / "in.npy"), "--axis", "y", "-o", str(tmp_path / "m.vtp"),
+                 "--sites", "20", "-q"]) == 0
+    assert os.path.getsize(tmp_path / "m.vtp") > 0
+
+
+def test_a_failure_after_the_mesh_leaves_no_output(volume_files, tmp_path, monkeypatch):
+    import ctseg.filters.figure3d as figure3d
+    from ctseg.filters.job3d import segment_and_write_3d
+    from ctseg.params import resolve
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no OpenGL")
+
+    monkeypatch.setattr(figure3d, "render_volume_figure", broken)
+    image, geometry = read_image(volume_files / "v.nrrd")
+    with pytest.raises(RuntimeError, match="no OpenGL"):
+        segment_and_write_3d(image, geometry, resolve(mode="3d", n_sites=200), str(tmp_path / "m.vtu"),
+                             surfaces=str(tmp_path / "s.vtp"), figure=str(tmp_path / "f.png"))
+    assert os.listdir(tmp_path) == []
 
 
 def test_too_large_for_memory_is_refused_before_the_work(tmp_path, capsys, monkeypatch):
