@@ -11,6 +11,7 @@ from .errors import ParameterError
 from .intensity import rescale_gray
 from .levels import LEVEL_KEYS, material_levels
 from .params import AUTO, resolve
+from .partial_volume import claim_missing_levels
 from .recursive_cut import order_by_gray, segment_triangles
 from .triangulation import triangle_areas
 
@@ -91,6 +92,9 @@ def label_mesh(image, mesh, gray, params=None, *, scale=None, levels_255=None, *
     p = resolve(params, **overrides)
     img = as_image(image)
     n_materials = p.n_materials
+    # the number of materials asked for this image (not a volume's, which a slice may not all
+    # hold; not given levels, which this image may not all hold): each of them gets elements
+    claim = levels_255 is None and n_materials != AUTO and p.gray_levels == AUTO
     gray = np.asarray(gray, float)
     if gray.shape != (len(mesh.triangles),):
         raise ParameterError(f"gray: expected one value per triangle ({len(mesh.triangles)}), "
@@ -135,13 +139,15 @@ def label_mesh(image, mesh, gray, params=None, *, scale=None, levels_255=None, *
         times["blur_correction"] = time.perf_counter() - t0
         seg = segment_triangles(np.clip(f_sharp, 0.0, 255.0), area, mesh.adjacency, cent,
                                 levels=levels, **cut)
-    if fixed:
-        # one numbering for every slice: the index of the level the material was cut at
-        material = np.searchsorted(levels, seg.mode_gray)[seg.material]
+    # the index of the level each material was cut at
+    material = np.searchsorted(levels, seg.mode_gray)[seg.material]
+    if claim:
+        material = claim_missing_levels(f255, material, levels, mesh.adjacency)
+    if fixed:  # one numbering for every slice
         mat_gray = levels / factor + offset if factor else np.full(len(levels), offset)
     else:
         # numbered by mean gray in the input's units (the 0-255 copy is clipped)
-        material, mat_gray, _ = order_by_gray(seg.material, gray, area)
+        material, mat_gray, _ = order_by_gray(material, gray, area)
     return MeshLabels(material=material.astype(np.int64), material_gray=np.asarray(mat_gray, float),
                       levels_255=seg.mode_gray if not fixed else levels,
                       pixel_sigma=float(pixel_sigma), segmentation=seg, blur_px=blur_px,

@@ -142,3 +142,64 @@ def _partial_volume_pass(f, mat, boundary, start, dst, means):
             mat[t] = best
             changed = True
     return changed
+
+
+def claim_missing_levels(f, material, levels, adjacency):
+    """Give every level that no element holds the elements leaning most toward it.
+
+    Where the user fixed the number of materials, a material thinner
+    than the elements (a one-voxel sheet, a wire) has no element of its own gray: each of
+    its elements averages it with a neighbour. An element's lean toward a missing level k
+    is how far its gray has moved from its own level toward k,
+    ``(f - level[own]) / (level[k] - level[own])`` (0 at its own level, 1 at k's). The
+    element leaning most, and the elements leaning at least half as much connected to it
+    through such elements, take k, save the least leaning element of a level they would
+    empty; levels are claimed in order of their best lean.
+
+    Parameters
+    ----------
+    f : (m,) array_like
+        Element grays, in the units of ``levels``.
+    material : (m,) int array_like
+        Each element's level index.
+    levels : (K,) array_like, ascending
+    adjacency : (a, 2) int array_like
+        Elements sharing an edge (2D) or a face (3D).
+
+    Returns
+    -------
+    material : (m,) int64 ndarray
+        Every level index 0..K-1 held by at least one element (when there are K elements).
+
+    Example
+    -------
+    >>> claim_missing_levels([0, 10, 130, 100], [0, 0, 1, 1], [0, 100, 200],
+    ...                      [[0, 1], [1, 2], [2, 3]]).tolist()
+    [0, 0, 2, 1]
+    """
+    f = np.asarray(f, float)
+    material = np.asarray(material, np.int64).copy()
+    levels = np.asarray(levels, float)
+    adjacency = np.asarray(adjacency, np.int64).reshape(-1, 2)
+    a, b = adjacency[:, 0], adjacency[:, 1]
+    for _ in range(len(levels)):  # each pass gives one missing level its elements
+        count = np.bincount(material, minlength=len(levels))
+        missing = np.flatnonzero(count == 0)
+        if len(missing) == 0 or len(f) <= np.count_nonzero(count):
+            break
+        own = levels[material]
+        span = levels[missing][:, None] - own[None, :]  # never 0: own levels are held
+        lean = np.where(count[material] > 1, (f - own) / span, -np.inf)  # no level emptied
+        row = int(np.argmax(lean.max(axis=1)))
+        best = int(np.argmax(lean[row]))
+        near = (lean[row] >= 0.5 * lean[row, best]) if lean[row, best] > 0 else (np.arange(len(f)) == best)
+        near &= count[material] > 1
+        keep = near[a] & near[b]
+        _, piece = connected_pieces(np.column_stack([a[keep], b[keep]]), len(f))
+        take = near & (piece == piece[best])
+        for lev in np.unique(material[take]):  # each level keeps its least leaning element
+            members = np.flatnonzero(material == lev)
+            if take[members].all():
+                take[members[np.argmin(lean[row, members])]] = False
+        material[take] = missing[row]
+    return material

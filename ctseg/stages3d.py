@@ -22,6 +22,7 @@ from .levels import volume_levels
 from .levels3d import checked_levels
 from .mixed_tetra import relabel_beyond_iso50, relabel_mixed
 from .params import AUTO, DEFAULTS, resolve
+from .partial_volume import claim_missing_levels
 from .pipeline import DENSITY_KEYS
 from .recursive_cut import order_by_gray, segment_triangles
 from .site_budget import site_budget_3d
@@ -364,6 +365,8 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
     # neighbouring voxels would count the edges too, which on a porous volume are many
     material, beyond = run("iso50_relabel", 0.895, relabel_beyond_iso50, f255, material,
                            levels, mesh.adjacency, volume_vox, 3.0 * pixel_sigma)
+    if p.n_materials != AUTO and p.gray_levels == AUTO:  # the K materials asked for get elements
+        material = claim_missing_levels(f255, material, levels, mesh.adjacency)
     material, relabelled = run("manifold_repair", 0.9, repair_pinched_edges, mesh, material,
                                volume_vox)
     # materials numbered by level; those no tetrahedron holds are dropped from the count

@@ -113,3 +113,56 @@ def test_merge_threshold_sets_the_level_separation():
     # three materials, a threshold of 40 merges the two darker ones
     assert ctseg.segment_image(img, n_sites=300).n_materials == 3
     assert ctseg.segment_image(img, n_sites=300, merge_threshold_255=40.0).n_materials == 2
+
+
+def _thin_line(value=200.0):
+    """A 32 x 32 image: air | aluminium (100), with a one-pixel line of a third material."""
+    img = np.zeros((32, 32))
+    img[:, 16:] = 100.0
+    img[8, 4:12] = value
+    return img
+
+
+def test_the_number_of_materials_asked_is_honoured_even_thinner_than_the_elements():
+    import ctseg
+
+    img = _thin_line()
+    assert ctseg.segment_image(img).n_materials == 2  # on its own the line gets no triangle
+    # (the third level found for n_materials=3 is the edge's 3 x 3 plateau, 66.7)
+    seg = ctseg.segment_image(img, n_materials=3)
+    count = np.bincount(seg.material, minlength=3)
+    assert seg.n_materials == 3 and np.all(count > 0), count
+    # given levels may be absent from an image: the line's stays empty (test_gray_levels.py)
+    seg = ctseg.segment_image(img, gray_levels=[0.0, 100.0, 200.0])
+    assert np.bincount(seg.material, minlength=3)[2] == 0
+
+
+def test_the_number_of_materials_asked_is_honoured_in_3d():
+    import ctseg
+
+    vol = np.repeat(_thin_line()[None], 6, axis=0)  # a one-voxel sheet
+    assert ctseg.segment_volume(vol, mode="3d").n_materials == 2
+    seg = ctseg.segment_volume(vol, mode="3d", n_materials=3)
+    count = np.bincount(seg.material, minlength=3)
+    assert seg.n_materials == 3 and np.all(count > 0), count
+    # the sheet's material: the tetrahedra whose gray leans most toward the sheet
+    top = seg.points[seg.tetrahedra[seg.material == np.argmin(count)]].reshape(-1, 3)
+    assert np.all(np.abs(top[:, 1] - 8) < 12), top
+
+
+def test_claim_missing_levels_never_empties_a_level():
+    from ctseg.partial_volume import claim_missing_levels
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        m, k = rng.integers(2, 12), rng.integers(2, 5)
+        levels = np.sort(rng.choice(256, k, replace=False)).astype(float)
+        material = rng.integers(0, k, m)
+        f = rng.uniform(0, 255, m)
+        chain = np.column_stack([np.arange(m - 1), np.arange(1, m)])
+        out = claim_missing_levels(f, material, levels, chain)
+        before = np.bincount(material, minlength=k) > 0
+        after = np.bincount(out, minlength=k) > 0
+        assert np.all(after[before])  # held levels stay held
+        assert after.sum() == min(k, m)  # and every missing one is held where elements allow
+        assert np.all(out[out != material] < k) and np.all(~before[out[out != material]])
