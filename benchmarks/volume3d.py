@@ -18,6 +18,11 @@ memory is its own:
   material levels and the same rules, :func:`ctseg.recursive_cut.segment_triangles`) on the
   6-connected voxel grid (PyMaxflow, Boykov-Kolmogorov).
 
+Both baselines are followed, within their timed job, by vtkSurfaceNets3D on their label
+map (benchmarks/surface_nets.py: every material's closed surface, the box padded with a
+background voxel), whose surfaces are measured as ctseg's: non-manifold edges, distance of
+their vertices to the true interfaces.
+
 Measured: Dice per material against the voxel truth (ctseg 3D's tetrahedra rasterised with
 :func:`ctseg.tetra_gray.voxel_overlaps`: each voxel takes the material with the largest
 overlap), where the errors lie (within a voxel of a true boundary or not; false positives
@@ -66,7 +71,10 @@ def run_ctseg_slices(img, sp, spec):
 
 def run_otsu(img, sp, spec):
     from baselines import otsu_labels
-    return otsu_labels(img, spec["k_true"])
+    from surface_nets import surface_nets
+
+    labels = otsu_labels(img, spec["k_true"])
+    return labels, surface_nets(labels, sp)
 
 
 def run_graphcut(img, sp, spec):
@@ -89,7 +97,10 @@ def run_graphcut(img, sp, spec):
     del ids, k, j, i
     seg = segment_triangles(g255, np.ones(img.size), adj, cent, levels=levels,
                             **{key: getattr(p, key) for key in CUT_KEYS})
-    return np.searchsorted(levels, seg.mode_gray)[seg.material].reshape(img.shape)
+    labels = np.searchsorted(levels, seg.mode_gray)[seg.material].reshape(img.shape)
+    from surface_nets import surface_nets
+
+    return labels, surface_nets(labels, sp)
 
 
 def rasterise(seg):
@@ -136,9 +147,17 @@ def post(method, out, img):
         extra = {"n_triangles": d["n_triangles"], "n_materials": d["n_materials"],
                  "executor": d["executor"], "slice_times_s": d["slice_times_s"],
                  "material_levels_255": d["material_levels_255"]}
-    else:
-        labels = np.asarray(out)
+    else:  # a label map and its vtkSurfaceNets3D surfaces
+        from surface_nets import PAD, closed_surface_report
+
+        labels, (pts, tri, pair) = out
+        labels = np.asarray(labels)
         gray = class_gray(img, labels)
+        extra = {"n_surface_triangles": int(len(tri)),
+                 "surface_checks": list(closed_surface_report(tri, pair).values())}
+        for a, b in np.unique(pair[np.all(pair != PAD, axis=1)], axis=0):
+            rows = np.all(pair == (a, b), axis=1)
+            arrays[f"iface_{a}_{b}"] = pts[np.unique(tri[rows])]
     return labels.astype(np.uint8), gray, extra, arrays
 
 
@@ -215,8 +234,9 @@ def evaluate(ph, res, arrays, aux):
             "false": int(false.sum()), "false_far": int((false & (aux["to_material"][m] > 2.0)).sum())}
     ev["feature_recall"] = {n: float(np.mean(pred.ravel()[mask] == lab)) if mask.any() else None
                             for n, (mask, lab) in aux["features"].items()}
-    if res.get("n_tetrahedra"):
-        ev["tets_per_voxel"] = res["n_tetrahedra"] / ph.truth.size
+    if res.get("n_tetrahedra") or res.get("n_surface_triangles"):
+        if res.get("n_tetrahedra"):
+            ev["tets_per_voxel"] = res["n_tetrahedra"] / ph.truth.size
         ev["non_manifold_edges"] = int(sum(c["non_manifold_edges"] for c in res["surface_checks"]))
         present = [(a, b) for a in range(K) for b in range(a + 1, K) if len(interface_points(ph, a, b))]
         groups = {}  # true pair name -> (own, any) distances; two classes may map to one material
@@ -329,18 +349,19 @@ def markdown(res):
                        + " | ".join(fmt(m["times_s"].get(s), 2) for s in stages)
                        + f" | {m['n_sites']} | {m['n_tetrahedra']} | {m['lloyd_iterations']} | "
                        f"{m['relabelled_for_manifold']} |")
-    out += ["", "## ctseg 3D: interface vertices to the true interfaces (voxels)", "",
-            "Each vertex of ctseg's interface a|b against the true a|b interface (the goals' measure; "
+    out += ["", "## Interface vertices to the true interfaces (voxels)", "",
+            "Each vertex of a method's interface a|b (ctseg 3D's interface triangles; the baselines' "
+            "vtkSurfaceNets3D surfaces of their label maps) against the true a|b interface (the goals' measure; "
             "a vertex between the right materials in the wrong place, or between wrongly labelled "
             "materials, is far from it), and against the nearest true interface of any pair (where "
             "the surfaces lie, whatever their labels).", "",
-            "| volume | pair | vertices | mean | median | p95 | max | share <= 1 | any pair: mean | p95 |",
-            "|---|---|---|---|---|---|---|---|---|---|"]
-    for case in res["cases"]:
-        iv = case["methods"].get("ctseg_3d", {}).get("eval", {}).get("interface_vox")
+            "| volume | method | pair | vertices | mean | median | p95 | max | share <= 1 | any pair: mean | p95 |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for case, name in ((c, n) for c in res["cases"] for n in c["methods"]):
+        iv = case["methods"][name].get("eval", {}).get("interface_vox")
         if iv:
             rows = list(iv["per_pair"].items()) + [("**all**", iv)]
-            out += [f"| {case['size']}^3 seed {case['seed']} | {p.replace('|', '/')} | {v['vertices']} | "
+            out += [f"| {case['size']}^3 seed {case['seed']} | {name} | {p.replace('|', '/')} | {v['vertices']} | "
                     f"{v['mean']:.2f} | "
                     f"{v['median']:.2f} | {v['p95']:.2f} | {v['max']:.1f} | {v['within_1']:.2f} | "
                     f"{v['any_pair_mean']:.2f} | {v['any_pair_p95']:.2f} |" for p, v in rows]

@@ -46,3 +46,21 @@ def test_pixel_boundary_edges_lie_between_labels():
     assert np.allclose(np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1), 1.0)
     mid = seg.mean(axis=1)
     assert np.all((mid[:, 0] >= 1.5) & (mid[:, 0] <= 3.5) & (mid[:, 1] >= 0.5) & (mid[:, 1] <= 2.5))
+
+
+def test_surface_nets_gives_closed_surfaces_on_the_interfaces():
+    from surface_nets import PAD, closed_surface_report, surface_nets
+
+    sp = np.array([0.5, 0.5, 1.0])
+    k, j, i = np.indices((16, 28, 28))
+    r = np.sqrt(((i - 13.5) * sp[0]) ** 2 + ((j - 13.5) * sp[1]) ** 2 + ((k - 7.5) * sp[2]) ** 2)
+    labels = (r < 5.0).astype(np.uint8) + (r < 2.5)  # a ball (1) with a core (2) in air (0)
+    pts, tri, pair = surface_nets(labels, sp)
+    report = closed_surface_report(tri, pair)
+    assert sorted(report) == [0, 1, 2]
+    assert all(r["boundary_edges"] == 0 and r["non_manifold_edges"] == 0 for r in report.values())
+    assert {tuple(p) for p in np.unique(pair, axis=0)} == {(0, 1), (1, 2), (0, PAD)}
+    centre = np.array([13.5, 13.5, 7.5]) * sp
+    for (a, b), radius in (((0, 1), 5.0), ((1, 2), 2.5)):
+        v = pts[np.unique(tri[np.all(pair == (a, b), axis=1)])]
+        assert np.all(np.abs(np.linalg.norm(v - centre, axis=1) - radius) < 1.0)  # within a voxel
