@@ -15,10 +15,17 @@ mix, every fourth with 0.3x and every fourth with 3x the photons), about 5 min.
 512 x 512, one 8-bit clipped), each with the site budget from the boundary length (the
 default) and with the old size rule (``site_rule='area'``), at the defaults and with the
 true gray levels given (the mesh judged apart from the level finding), about 4 min.
+``--all`` runs every accuracy family in turn, each into its table in benchmarks/results/:
+this script's sweep (accuracy.md), held-out (accuracy_held_out.md) and granular slices
+(accuracy_granular.md), the second simulator's fan-beam slices (accuracy_fan.py), the real
+scans against the hand references (realdata_fractions.py) and the granular volumes in 3D
+(accuracy_granular3d.py), about 40 min.
 """
 import argparse
 import json
 import os
+import subprocess
+import sys
 import time
 
 import ctseg
@@ -151,7 +158,23 @@ if __name__ == "__main__":
     ap.add_argument("--held-out", action="store_true", help="only the slices in HELD_OUT")
     ap.add_argument("--granular", action="store_true", help="only the slices in GRANULAR, "
                     "new site budget against the old size rule")
+    ap.add_argument("--all", action="store_true", help="every accuracy family, each into its "
+                    "table in benchmarks/results/")
     args = ap.parse_args()
+    if args.all:
+        here = os.path.dirname(os.path.abspath(__file__))
+        results = os.path.join(here, "results")
+        for script, extra, table_name in (
+                ("accuracy.py", ["--sweep"], "accuracy.md"),
+                ("accuracy.py", ["--held-out"], "accuracy_held_out.md"),
+                ("accuracy.py", ["--granular"], "accuracy_granular.md"),
+                ("accuracy_fan.py", [], "accuracy_fan.md"),
+                ("realdata_fractions.py", [], "realdata_fractions.md"),
+                ("accuracy_granular3d.py", [], "accuracy_granular3d.md")):
+            print(f"== {script} {' '.join(extra)} -> results/{table_name}", flush=True)
+            subprocess.run([sys.executable, os.path.join(here, script), *extra,
+                            "--out", os.path.join(results, table_name)], check=True)
+        raise SystemExit(0)
     if args.granular:
         pairs = granular_results()
         md = granular_table(pairs)
