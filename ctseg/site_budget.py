@@ -7,6 +7,7 @@ its boundary length, measured on the image (:func:`boundary_length`).
 """
 import numpy as np
 from scipy import ndimage
+from scipy.special import ndtri
 
 from ._validate import as_image
 from .params import DEFAULTS, check
@@ -34,16 +35,23 @@ mean boundary spacing apart (see :func:`site_budget`)."""
 
 def _noise_sigma(img):
     """Robust pixel noise: the MAD of adjacent-pixel differences (as
-    :func:`ctseg.intensity.estimate_noise`). When most differences are exactly 0 (a
-    quantized or windowed scan whose background is clipped flat), the MAD is 0 whatever
-    the noise elsewhere; then the nonzero differences alone give it, if they are at least
-    a tenth of all (fewer are the edges of a noiseless image: its noise is 0)."""
+    :func:`ctseg.intensity.estimate_noise`). When most differences are exactly 0 the MAD
+    is 0 whatever the noise, and the nonzero differences tell why. Most of them one step q
+    (the smallest): a quantized scan whose noise is below q; a normal difference of sd s_d
+    rounds to 0 with probability p0 = P(|d| < q / 2), so the share p0 of zero differences
+    gives s_d = (q / 2) / z((1 + p0) / 2), z the normal quantile. Otherwise a scan whose
+    background is clipped flat: the nonzero differences alone give the noise, if they are
+    at least a tenth of all (fewer are the edges of a noiseless image: its noise is 0)."""
     d = np.concatenate([np.diff(img, axis=0).ravel(), np.diff(img, axis=1).ravel()])
-    nonzero = d[d != 0]
+    nonzero = np.abs(d[d != 0])
     if len(nonzero) < 0.5 * len(d):
         if len(nonzero) < 0.1 * len(d):
             return 0.0
-        d = nonzero
+        step = nonzero.min()
+        if np.mean(nonzero <= 1.5 * step) >= 0.5:
+            p0 = 1.0 - len(nonzero) / len(d)
+            return float(0.5 * step / ndtri(0.5 * (1.0 + p0)) / np.sqrt(2.0))
+        d = d[d != 0]
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
 
 

@@ -34,6 +34,22 @@ def test_boundary_length_of_a_disc_and_of_noise():
     assert boundary_length(np.full((50, 60), 7.0)) == (0.0, pytest.approx(np.zeros((50, 60), bool)))
 
 
+@pytest.mark.parametrize("sd", [20.0, 25.0, 30.0])  # from a third to a half of the step
+def test_noise_of_a_quantized_scan_from_its_share_of_zero_differences(sd):
+    # a windowed medical scan: noise below its gray step, most neighbours exactly equal
+    from ctseg.site_budget import _noise_sigma
+
+    rng = np.random.default_rng(int(sd))
+    step = 62.5
+    img = np.round(rng.normal(0.0, sd, (300, 300)) / step) * step
+    assert abs(_noise_sigma(img) - sd) < 0.12 * sd
+    # a low-contrast disc (3 sd) in that noise: its edge is found, not taken for noise
+    disc = np.round((discs((300, 300), [(150, 150)], 60, contrast=3 * sd)
+                     + rng.normal(0.0, sd, (300, 300))) / step) * step
+    length, _ = boundary_length(disc)
+    assert length > 0.5 * 2 * np.pi * 60
+
+
 def test_site_count_is_monotone_in_the_boundary_length():
     rng = np.random.default_rng(1)
     counts, lengths = [], []
