@@ -54,3 +54,14 @@ def cut_energy(caps, labels):
     if len(caps.edges):
         e += caps.edge_cap[labels[caps.edges[:, 0]] != labels[caps.edges[:, 1]]].sum()
     return float(e)
+
+
+def box_share(shape):
+    """Volume of each voxel inside the box of voxel centres: 1, 1/2, 1/4, 1/8."""
+    w = np.ones(shape)
+    for ax in range(3):
+        idx = [slice(None)] * 3
+        for end in (0, -1):
+            idx[ax] = end
+            w[tuple(idx)] *= 0.5
+    return w

@@ -8,6 +8,7 @@ import ctseg
 from ctseg.meshcheck import mesh_check_report
 from ctseg.tetra_gray import voxel_overlaps
 from ctseg.tetrahedra import tetra_volumes
+from oracles import box_share
 
 
 @st.composite
@@ -31,17 +32,6 @@ def small_volumes(draw):
     return vol, spacing, n_sites
 
 
-def _share_of_each_voxel(shape):
-    """The part of each voxel's cube inside the box of voxel centres."""
-    w = np.ones(shape)
-    for axis in range(3):
-        ends = [slice(None)] * 3
-        for end in (0, -1):
-            ends[axis] = end
-            w[tuple(ends)] *= 0.5
-    return w
-
-
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(small_volumes())
 def test_pipeline_invariants_3d(case):
@@ -54,7 +44,7 @@ def test_pipeline_invariants_3d(case):
     # every voxel's (box-clipped) cube shared out exactly once
     _, vox, ov = voxel_overlaps(seg.points, seg.tetrahedra, vol.shape, spacing)
     np.testing.assert_allclose(np.bincount(vox, ov, vol.size).reshape(vol.shape),
-                               _share_of_each_voxel(vol.shape), atol=1e-9)
+                               box_share(vol.shape), atol=1e-9)
     # CVT energy never increases
     e = np.array(seg.diagnostics["cvt_energy"])
     assert np.all(np.diff(e) <= 1e-9 * max(e[0], 1e-300))
