@@ -1,7 +1,8 @@
 """The 3D mode against slice-by-slice ctseg and two voxel baselines, on true 3D phantoms.
 
     python benchmarks/volume3d.py [--sizes 64 96 160] [--repeats 1] [--seeds 0] [--seeds96 0 1]
-                                  [--methods ctseg_3d ctseg_slices otsu graphcut]
+                                  [--methods ctseg_3d ctseg_slices otsu graphcut cgal cleaver]
+                                  [--cleaver-python PATH]
 
 Phantoms: :func:`ctseg.phantoms3d.make_part_3d` (a tilted aluminium housing with a polymer
 bushing and layer 4 noise sd above air, a steel shaft and ball, a 2.5-voxel fin, gas pores;
@@ -18,7 +19,12 @@ memory is its own:
   material levels and the same rules, :func:`ctseg.recursive_cut.segment_triangles`) on the
   6-connected voxel grid (PyMaxflow, Boykov-Kolmogorov).
 
-Both baselines are followed, within their timed job, by vtkSurfaceNets3D on their label
+- ``cgal``, ``cleaver``: CGAL Mesh_3 (pygalmesh) and Cleaver (itk-cleaver, in its own
+  environment, ``--cleaver-python``) on the voxel graph cut's label map, the best of the
+  two baselines (benchmarks/tet_baselines.py says how to install them; not ctseg
+  dependencies). Their time is the meshing alone, after the label map.
+
+The two voxel baselines are followed, within their timed job, by vtkSurfaceNets3D on their label
 map (benchmarks/surface_nets.py: every material's closed surface, the box padded with a
 background voxel), whose surfaces are measured as ctseg's: non-manifold edges, distance of
 their vertices to the true interfaces.
@@ -51,7 +57,7 @@ sys.path.insert(0, HERE)
 
 from run import reset_peak, status_mib  # noqa: E402  (the benchmarks' one memory probe)
 
-METHODS = ("ctseg_3d", "ctseg_slices", "otsu", "graphcut")
+METHODS = ("ctseg_3d", "ctseg_slices", "otsu", "graphcut", "cgal", "cleaver")
 GOALS = {"min_dice": 0.95, "interface_mean_vox": 0.5, "interface_p95_vox": 1.5,
          "tets_per_voxel": 1 / 20, "min_dihedral_deg": 5.0, "p1_dihedral_deg": 13.0,
          "non_manifold_edges": 0, "wall_s_at_160": 15.0}
@@ -103,6 +109,18 @@ def run_graphcut(img, sp, spec):
     return labels, surface_nets(labels, sp)
 
 
+def run_cgal(img, sp, spec):
+    from tet_baselines import cgal_mesh
+    with np.load(spec["labels"]) as z:
+        return cgal_mesh(z["labels"], sp)
+
+
+def run_cleaver(img, sp, spec):
+    from tet_baselines import cleaver_mesh
+    with np.load(spec["labels"]) as z:
+        return cleaver_mesh(z["labels"], sp, spec["cleaver_python"])
+
+
 def rasterise(seg):
     """Per voxel, the material of ctseg 3D's tetrahedra covering most of it."""
     from ctseg.tetra_gray import voxel_overlaps
@@ -119,10 +137,27 @@ def class_gray(img, labels):
             for c in range(n)]
 
 
-def post(method, out, img):
+def post(method, out, img, sp):
     """Labels, class grays and the method's own numbers, after the timing."""
     extra, arrays = {}, {}
-    if method == "ctseg_3d":
+    if method in ("cgal", "cleaver"):  # tetrahedra on the voxel graph cut's labels
+        from ctseg.tetrahedra import tetra_quality
+        from tet_baselines import label_voxels, tet_surface_report
+
+        pts, tets, lab = out[:3]
+        # voxels no tetrahedron reaches: a class of their own, counted as the darkest material
+        labels = label_voxels(pts, tets, lab, img.shape, sp, outside=int(lab.max()) + 1)
+        gray = class_gray(img, labels)
+        if np.any(labels > lab.max()):
+            gray[-1] = float("nan")
+        extra["voxels_outside_mesh"] = int(np.sum(labels > lab.max()))
+        report, pairs = tet_surface_report(tets, lab)
+        extra.update({"n_tetrahedra": int(len(tets)), "element_quality": tetra_quality(pts, tets),
+                      "surface_checks": list(report.values())})
+        if method == "cleaver":  # its own process: the meshing call's time and memory
+            extra.update(mesh_wall_s=out[3], mesh_peak_mib=out[4])
+        arrays = {f"iface_{a}_{b}": pts[v] for (a, b), v in pairs.items()}
+    elif method == "ctseg_3d":
         from ctseg.meshcheck import mesh_check_report
 
         labels, gray = rasterise(out), [float(g) for g in out.material_gray]
@@ -166,7 +201,8 @@ def child_main(spec):
 
     job = globals()["run_" + spec["method"]]
     sp = tuple(spec["spacing"])
-    job(make_part_3d(24, seed=1, porosity=False).image, sp, spec)  # warm-up: imports, kernels
+    if "labels" not in spec:  # the meshers of a label map have no kernels to compile
+        job(make_part_3d(24, seed=1, porosity=False).image, sp, spec)  # warm-up: imports, kernels
     img = np.load(spec["image"])
     exact = reset_peak()
     before = status_mib("VmRSS")
@@ -177,7 +213,9 @@ def child_main(spec):
         walls.append(time.perf_counter() - t0)
     peak = status_mib("VmHWM")
     workers = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
-    labels, gray, extra, arrays = post(spec["method"], out, img)
+    labels, gray, extra, arrays = post(spec["method"], out, img, sp)
+    if "mesh_wall_s" in extra:  # Cleaver ran in a process of its own: its numbers
+        walls, peak = [extra["mesh_wall_s"]], extra["mesh_peak_mib"]
     np.savez(spec["out"], labels=labels, **arrays)
     print(json.dumps({"wall_s": float(np.median(walls)), "walls_s": walls, "peak_mib": peak,
                       "before_mib": before, "peak_reset": exact, "worker_peak_mib": workers,
@@ -189,7 +227,8 @@ def in_child(spec):
                          capture_output=True, text=True)
     if out.returncode:
         return {"error": out.stderr.strip()[-800:]}
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    # the last JSON line (CGAL's C++ stdout may flush its progress after it, at exit)
+    return json.loads([line for line in out.stdout.splitlines() if line.startswith("{")][-1])
 
 
 # ------------------------------------------------------------------------ evaluation
@@ -398,6 +437,8 @@ def main():
     ap.add_argument("--seeds96", type=int, nargs="+", default=[0, 1], help="seeds at size 96")
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     ap.add_argument("--graphcut-max-voxels", type=int, default=5_000_000)
+    ap.add_argument("--cleaver-python", default=".venv-cleaver/bin/python",
+                    help="the Python of Cleaver's own environment (benchmarks/tet_baselines.py)")
     ap.add_argument("--noise-sd", type=float, default=None, help="phantom noise (default: its own)")
     ap.add_argument("--out", default=os.path.join(HERE, "results", "volume3d"),
                     help="output path without .json / .md")
@@ -424,13 +465,19 @@ def main():
                         "material_fraction": (np.bincount(ph.truth.ravel(), minlength=len(ph.names))
                                               / ph.truth.size).tolist(),
                         "pores": len(ph.features["pores"]), "noise_sd": ph.noise_sd, "methods": {}}
-                for method in args.methods:
+                for method in sorted(args.methods, key=METHODS.index):  # the graph cut before its meshers
                     if method == "graphcut" and ph.image.size > args.graphcut_max_voxels:
                         case["methods"][method] = {"error": f"skipped: over {args.graphcut_max_voxels} voxels"}
                         continue
                     out = os.path.join(tmp, f"{method}.npz")
-                    r = in_child({"method": method, "image": path, "out": out, "repeats": args.repeats,
-                                  "spacing": ph.spacing.tolist(), "k_true": len(ph.names)})
+                    spec = {"method": method, "image": path, "out": out, "repeats": args.repeats,
+                            "spacing": ph.spacing.tolist(), "k_true": len(ph.names)}
+                    if method in ("cgal", "cleaver"):
+                        if "eval" not in case["methods"].get("graphcut", {}):
+                            case["methods"][method] = {"error": "skipped: needs the graphcut method's labels"}
+                            continue
+                        spec.update(labels=os.path.join(tmp, "graphcut.npz"), cleaver_python=args.cleaver_python)
+                    r = in_child(spec)
                     if "error" not in r:
                         with np.load(out) as z:
                             r["eval"] = evaluate(ph, r, dict(z), aux)

@@ -69,3 +69,51 @@ def test_surface_nets_gives_closed_surfaces_on_the_interfaces():
     for (a, b), radius in (((0, 1), 5.0), ((1, 2), 2.5)):
         v = pts[np.unique(tri[np.all(pair == (a, b), axis=1)])]
         assert np.all(np.abs(np.linalg.norm(v - centre, axis=1) - radius) < 1.0)  # within a voxel
+
+
+def _grid_tets(n=4, seed=0):
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    g = np.stack(np.meshgrid(*[np.arange(n + 1.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    inner = np.all((g > 0) & (g < n), axis=1)
+    g[inner] += rng.uniform(-0.2, 0.2, (int(inner.sum()), 3))
+    return g, Delaunay(g).simplices
+
+
+def test_tet_surface_report_closed_and_pinched():
+    from tet_baselines import tet_surface_report
+
+    pts, tets = _grid_tets()
+    c = pts[tets].mean(axis=1)
+    material = (c[:, 0] > 2.0).astype(int)  # two slabs: closed surfaces, one interface
+    report, pairs = tet_surface_report(tets, material)
+    assert all(r["non_manifold_edges"] == 0 and r["boundary_edges"] == 0 for r in report.values())
+    assert list(pairs) == [(0, 1)] and len(pairs[(0, 1)]) > 0
+    # two tetrahedra of material 1 sharing an edge and no face: that edge is non-manifold
+    faces = [set(map(frozenset, itertools.combinations(t, 3))) for t in tets]
+    for a in range(len(tets)):
+        for b in range(a + 1, len(tets)):
+            if len(set(tets[a]) & set(tets[b])) == 2 and not faces[a] & faces[b]:
+                break
+        else:
+            continue
+        break
+    material = np.zeros(len(tets), int)
+    material[[a, b]] = 1
+    report, _ = tet_surface_report(tets, material)
+    assert report[1]["non_manifold_edges"] == 1 and report[1]["boundary_edges"] == 0
+
+
+def test_label_voxels_of_a_mesh_over_the_voxels_outer_faces():
+    from tet_baselines import label_voxels
+
+    pts, tets = _grid_tets(4)  # voxel corners of a 4^3 volume: -0.5 .. 3.5
+    pts = (pts - 0.5) * [1.0, 1.0, 2.0]
+    c = pts[tets].mean(axis=1)
+    material = (c[:, 2] > 3.0).astype(int)  # z above 1.5 voxels (3.0 physical)
+    lab = label_voxels(pts, tets, material, (4, 4, 4), (1.0, 1.0, 2.0), outside=9)
+    assert np.all(lab[:1] == 0) and np.all(lab[-1:] == 1)
+    keep = c[:, 0] < 1.5  # a mesh covering part of the box: the rest is outside
+    lab = label_voxels(pts, tets[keep], material[keep], (4, 4, 4), (1.0, 1.0, 2.0), outside=9)
+    assert np.all(lab[:, :, 3] == 9) and not np.any(lab[:, :, 0] == 9)
