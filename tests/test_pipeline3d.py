@@ -111,3 +111,17 @@ def test_face_area_weighting_passes_the_shared_face_areas(monkeypatch):
     shared = (all_faces - 2 * (x * y + y * z + z * x)) / 2
     assert seen and all(len(e) == len(seen[0]) for e in seen)
     assert np.isclose(seen[0].sum() * np.prod(spacing) ** (2 / 3), shared, rtol=1e-9)
+
+
+def test_every_z_slice_is_streak_corrected_as_in_slices_mode():
+    # slices simulated with steel (beam-hardening streaks): 3D mode corrects each z slice
+    # against the volume's levels, with the weights slices mode finds for the same slices
+    ph = make_volume(3, 128, seed=0, simulate=True)
+    seg3 = ctseg.segment_volume(ph.image, mode="3d", n_sites=300)
+    slices = ctseg.segment_volume(ph.image, mode="slices", n_sites=100, n_jobs=1)
+    w3 = seg3.diagnostics["streak_weights"]
+    ws = [s.diagnostics["streak_correction"]["weight"] for s in slices.slices]
+    assert len(w3) == 3 and max(w3) > 0  # (slice 0 holds no streak worth correcting)
+    np.testing.assert_allclose(w3, ws, rtol=1e-12)
+    off = ctseg.segment_volume(ph.image, mode="3d", n_sites=300, streak_correction=False)
+    assert off.diagnostics["streak_weights"] == [] and "streak_correction" not in off.diagnostics["times_s"]
