@@ -18,8 +18,8 @@ true gray levels given (the mesh judged apart from the level finding), about 4 m
 ``--all`` runs every accuracy family in turn, each into its table in benchmarks/results/:
 this script's sweep (accuracy.md), held-out (accuracy_held_out.md) and granular slices
 (accuracy_granular.md), the second simulator's fan-beam slices (accuracy_fan.py), the real
-scans against the hand references (realdata_fractions.py) and the granular volumes in 3D
-(accuracy_granular3d.py), about 40 min.
+scans against the hand references (realdata_fractions.py), the granular volumes in 3D
+(accuracy_granular3d.py) and the streak correction in 3D (streaks3d.py), about 45 min.
 """
 import argparse
 import json
@@ -170,7 +170,8 @@ if __name__ == "__main__":
                 ("accuracy.py", ["--granular"], "accuracy_granular.md"),
                 ("accuracy_fan.py", [], "accuracy_fan.md"),
                 ("realdata_fractions.py", [], "realdata_fractions.md"),
-                ("accuracy_granular3d.py", [], "accuracy_granular3d.md")):
+                ("accuracy_granular3d.py", [], "accuracy_granular3d.md"),
+                ("streaks3d.py", [], "streaks3d.md")):
             print(f"== {script} {' '.join(extra)} -> results/{table_name}", flush=True)
             subprocess.run([sys.executable, os.path.join(here, script), *extra,
                             "--out", os.path.join(results, table_name)], check=True)
