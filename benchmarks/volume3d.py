@@ -122,13 +122,11 @@ def run_cleaver(img, sp, spec):
 
 
 def rasterise(seg):
-    """Per voxel, the material of ctseg 3D's tetrahedra covering most of it."""
-    from ctseg.tetra_gray import voxel_overlaps
+    """Per voxel, the material of ctseg 3D's tetrahedra covering most of it (as the
+    baselines' tetrahedra: benchmarks/tet_baselines.py; ctseg's reach every voxel)."""
+    from tet_baselines import label_voxels
 
-    tet, vox, ov = voxel_overlaps(seg.points, seg.tetrahedra, seg.shape, seg.spacing)
-    K, n = seg.n_materials, int(np.prod(seg.shape))
-    acc = np.bincount(vox * K + seg.material[tet], weights=ov, minlength=n * K).reshape(n, K)
-    return np.argmax(acc, axis=1).reshape(seg.shape)
+    return label_voxels(seg.points, seg.tetrahedra, seg.material, seg.shape, seg.spacing, outside=-1)
 
 
 def class_gray(img, labels):
