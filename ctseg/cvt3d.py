@@ -49,6 +49,8 @@ class CVT3DResult:
         Which face (``2 axis + side``, axis 0..2 = x, y, z, side 0 at 0, 1 at the far end),
         edge (``4 axis + 2 side_b + side_c`` with ``axis`` the edge's direction and b < c
         the other two axes) or corner (``side_x + 2 side_y + 4 side_z``); -1 for free sites.
+    coarse_iter : int
+        Lloyd iterations on 2 x 2 x 2 voxel blocks before these (:func:`coarse_sites_3d`).
     """
 
     sites: np.ndarray
@@ -59,6 +61,7 @@ class CVT3DResult:
     empty_regions: int = 0
     site_class: np.ndarray = None
     site_feature: np.ndarray = None
+    coarse_iter: int = 0
 
 
 def _features(n_xyz, sp):
@@ -324,6 +327,64 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
     return CVT3DResult(sites=sites, labels=labels.astype(np.int64).reshape(rho.shape), energy=energy,
                        n_iter=it, converged=converged, empty_regions=empty_total,
                        site_class=cls, site_feature=feat)
+
+
+def coarse_sites_3d(rho, sites, spacing=(1.0, 1.0, 1.0), **lloyd_kw):
+    """Starting sites moved by Lloyd on the density averaged over 2 x 2 x 2 voxel blocks.
+
+    The block means form a volume of ``n // 2`` voxels per axis at twice the spacing; the
+    sites are scaled from the voxel box ``[0, (n - 1) s]`` onto the coarse box
+    ``[0, (n // 2 - 1) 2 s]`` (per axis), moved by :func:`lloyd_cvt_3d` there, and scaled
+    back, so corner, edge and face sites land on the voxel box's corners, edges and faces.
+    Lloyd's slow, long-range moves then cost an eighth of the voxels; the iterations on the
+    voxels that follow only settle the sites locally. Where a side would have fewer than
+    2 blocks, or the blocks are fewer than the sites, the sites come back unchanged.
+
+    Parameters
+    ----------
+    rho : (nz, ny, nx) array_like
+        Density (> 0).
+    sites : (n, 3) array_like
+        Starting sites (x, y, z), physical, inside the voxel box, distinct, n >= 8.
+    spacing : (3,) array_like, optional
+        Voxel spacing (sx, sy, sz).
+    **lloyd_kw
+        ``tol_px``, ``max_iter``, ``energy_rtol_3d``, ``overrelaxation_3d``, ``progress``
+        of the coarse :func:`lloyd_cvt_3d`.
+
+    Returns
+    -------
+    sites : (n', 3) ndarray
+        Inside the voxel box, distinct (n' >= n: the coarse run adds face and edge sites).
+    n_iter : int
+        Coarse Lloyd iterations (0 where the sites came back unchanged).
+
+    Raises
+    ------
+    InputError, ParameterError
+        As :func:`lloyd_cvt_3d`.
+
+    Example
+    -------
+    >>> from ctseg.sites import ward_sites_3d
+    >>> rho = np.ones((16, 16, 16))
+    >>> s, it = coarse_sites_3d(rho, ward_sites_3d(rho, 40, (1, 1, 1)), max_iter=20)
+    >>> bool(s.min() >= 0 and s.max() <= 15), 0 < it <= 20
+    (True, True)
+    """
+    rho, sites, sp, hi, _, _ = _check(rho, sites, spacing, DEFAULTS.tol_px, DEFAULTS.max_iter)
+    half = np.array(rho.shape) // 2  # (cz, cy, cx)
+    if half.min() < 2 or int(np.prod(half)) < len(sites):
+        return sites, 0
+    cz, cy, cx = (int(v) for v in half)
+    blocks = rho[:2 * cz, :2 * cy, :2 * cx].reshape(cz, 2, cy, 2, cx, 2).mean(axis=(1, 3, 5))
+    hi_coarse = (np.array([cx, cy, cz], float) - 1.0) * 2.0 * sp
+    coarse = lloyd_cvt_3d(blocks, np.clip(sites * (hi_coarse / hi), 0.0, hi_coarse), 2.0 * sp,
+                          **lloyd_kw)
+    fine = np.clip(coarse.sites * (hi / hi_coarse), 0.0, hi)
+    fine = np.where(coarse.sites == hi_coarse, hi, fine)  # exactly on the far faces
+    keep = _not_coincident(fine, coarse.site_class, _COINCIDENT_VOXELS * sp.min())
+    return np.ascontiguousarray(fine[keep]), coarse.n_iter
 
 
 def _not_coincident(sites, cls, radius):

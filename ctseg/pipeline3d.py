@@ -232,6 +232,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "total_time_s": float(sum(times.values())),
         "cvt_energy": [float(e) for e in cvt.energy],
         "lloyd_iterations": int(cvt.n_iter),
+        "coarse_lloyd_iterations": int(cvt.coarse_iter),
         "lloyd_converged": bool(cvt.converged),
         "empty_regions": int(cvt.empty_regions),
         "graphcut_calls": labels.graphcut_calls,

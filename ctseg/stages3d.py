@@ -8,13 +8,14 @@
 (9.7). Points are physical coordinates of the box, (x, y, z) = (i, j, k) x spacing;
 :func:`tetra_mesh` rebuilds the face graph of tetrahedra read back from elsewhere (a VTK
 grid)."""
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from ._validate import check_spacing
 from .blur import blur_corrected_gray_3d, region_levels
-from .cvt3d import lloyd_cvt_3d
+from .cvt3d import coarse_sites_3d, lloyd_cvt_3d
 from .density import density_volume
 from .errors import InputError, MeshCheckError, ParameterError
 from .labelling import CUT_KEYS
@@ -99,7 +100,10 @@ def density_3d(image, params=None, spacing=None):
 
 def cvt_sites_3d(rho, params=None, spacing=None, *, n_sites=None, progress=None, timed=None):
     """3D stages 2-3 (SPEC 9.2-9.3): initial sites (:func:`ctseg.sites.initial_sites_3d`)
-    and the voxel CVT (:func:`ctseg.cvt3d.lloyd_cvt_3d`) of a density volume.
+    and the voxel CVT (:func:`ctseg.cvt3d.lloyd_cvt_3d`) of a density volume; with
+    ``fine_iter_3d`` > 0 Lloyd runs first on 2 x 2 x 2 voxel blocks
+    (:func:`ctseg.cvt3d.coarse_sites_3d`, to ``max_iter``), then at most ``fine_iter_3d``
+    iterations on the voxels.
 
     Parameters
     ----------
@@ -113,8 +117,8 @@ def cvt_sites_3d(rho, params=None, spacing=None, *, n_sites=None, progress=None,
     progress : callable, optional
         ``progress(iteration, max_iter)`` after every Lloyd iteration.
     timed : callable, optional
-        A stage runner (:func:`ctseg.pipeline.stage_runner`) recording 'initial_sites'
-        and 'cvt'.
+        A stage runner (:func:`ctseg.pipeline.stage_runner`) recording 'initial_sites',
+        'coarse_cvt' and 'cvt'.
 
     Returns
     -------
@@ -131,9 +135,20 @@ def cvt_sites_3d(rho, params=None, spacing=None, *, n_sites=None, progress=None,
         n_sites = p.n_sites
     sites0 = run("initial_sites", 0.1, initial_sites_3d, rho, n_sites, sp, init=p.init,
                  seed=p.seed, ward_block_px=p.ward_block_px)
-    return run("cvt", 0.2, lloyd_cvt_3d, rho, sites0, sp, tol_px=p.tol_px,
-               max_iter=p.max_iter, progress=progress, energy_rtol_3d=p.energy_rtol_3d,
-               overrelaxation_3d=p.overrelaxation_3d)
+    lloyd = dict(tol_px=p.tol_px, max_iter=p.max_iter, progress=progress,
+                 energy_rtol_3d=p.energy_rtol_3d, overrelaxation_3d=p.overrelaxation_3d)
+    coarse_iter = 0
+    if p.fine_iter_3d:
+        if progress is not None:  # the coarse run reports the first half, the fine one the rest
+            lloyd["progress"] = lambda it, n: progress(it, 2 * n)
+        sites0, coarse_iter = run("coarse_cvt", 0.15, coarse_sites_3d, rho, sites0, sp, **lloyd)
+        lloyd["progress"] = progress
+        if coarse_iter:
+            lloyd["max_iter"] = p.fine_iter_3d
+            if progress is not None:
+                lloyd["progress"] = lambda it, n: progress(n + it, 2 * n)
+    return dataclasses.replace(run("cvt", 0.2, lloyd_cvt_3d, rho, sites0, sp, **lloyd),
+                               coarse_iter=coarse_iter)
 
 
 def tetrahedra_3d(sites, shape, params=None, spacing=None):

@@ -146,8 +146,9 @@ def test_stage_filters_take_exactly_what_their_functions_read():
 
     cvt = (keywords(ctseg.initial_sites) | keywords(ctseg.lloyd_cvt) | keywords(site_budget)
            | keywords(lloyd_cvt_3d)) - {"sites", "progress", "spacing"}
-    # n_sites auto: site_budget for a slice, voxels_per_site for a volume
-    assert cvt | {"voxels_per_site"} == set(CVTSitesFilter.PARAMETERS)
+    # n_sites auto: site_budget for a slice, voxels_per_site for a volume; fine_iter_3d:
+    # stages3d.cvt_sites_3d's choice between coarse_sites_3d and lloyd_cvt_3d alone
+    assert cvt | {"voxels_per_site", "fine_iter_3d"} == set(CVTSitesFilter.PARAMETERS)
 
 
 # ------------------------------------------------------------------------- ParaView

@@ -7,7 +7,7 @@ from scipy.spatial import cKDTree
 
 from ctseg import density_map
 from ctseg._cvt3d import _assign_3d, _nearest_many_3d, _reassign_3d
-from ctseg.cvt3d import CORNER, EDGE, FACE, FREE, _not_coincident, lloyd_cvt_3d
+from ctseg.cvt3d import CORNER, EDGE, FACE, FREE, _not_coincident, coarse_sites_3d, lloyd_cvt_3d
 from ctseg.density import density_volume
 from ctseg.errors import InputError, ParameterError
 from ctseg.phantoms import make_volume
@@ -223,6 +223,34 @@ def test_energy_tolerance_stops_where_the_energy_flattens():
     first = int(np.argmax(drops < rtol)) + 1
     assert drops.min() < rtol and early.n_iter == first < full.n_iter
     np.testing.assert_allclose(early.energy, e[:first + 1], rtol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["ward", "aniso", "random"])
+def test_coarse_pass_keeps_the_box_and_lowers_the_energy(name):
+    """coarse_sites_3d: distinct sites inside the voxel box, the 8 corners exactly on it,
+    the coarse run's face and edge sites exactly on their faces and edges (so the voxel
+    Lloyd keeps them as face, edge and corner sites), a lower voxel CVT energy than the start,
+    deterministic; a side of fewer than 4 voxels (under 2 blocks) gives the sites back."""
+    make, sp, n, init = CASES[name]
+    rho = density_volume(make(), sp)
+    start = initial_sites_3d(rho, n, sp, init=init, seed=1)
+    sites, it = coarse_sites_3d(rho, start, sp)
+    hi = box_of(rho.shape, sp)
+    assert it > 0 and len(sites) >= n and len(np.unique(sites, axis=0)) == len(sites)
+    assert np.all(sites >= 0) and np.all(sites <= hi)
+    corners = np.array(list(itertools.product(*[(0.0, h) for h in hi])))
+    assert all(np.any(np.all(sites == c, axis=1)) for c in corners)
+    on_box = np.any((sites == 0) | (sites == hi), axis=1)
+    fine = lloyd_cvt_3d(rho, sites, sp, max_iter=1)
+    assert np.all(fine.site_class[:len(sites)][on_box] != FREE)  # kept their classes
+    before = lloyd_cvt_3d(rho, start, sp, max_iter=1).energy[0]
+    assert fine.energy[0] < before
+    again, _ = coarse_sites_3d(rho, start, sp)
+    assert np.array_equal(again, sites)
+    thin = rho[:3]
+    inside = start[start[:, 2] <= 2 * sp[2]]
+    same, it0 = coarse_sites_3d(thin, inside, sp)
+    assert it0 == 0 and np.array_equal(same, inside)
 
 
 @pytest.mark.parametrize("name", ["aniso", "random"])
