@@ -14,10 +14,11 @@ mask; w is fitted by least squares so that each material's flat pixels are as un
 possible, with the pixel classes re-drawn from the corrected image a few times.
 
 Several metal parts in a plate harden the rays through two inserts and the plate between
-them more than ``L^2`` says: the ``polynomial`` model (``streak_model``; not the default, as
-it lost 0.011 min Dice on one slice of the 36-slice sweep of :mod:`ctseg.phantoms`) adds
+them more than ``L^2`` says: the ``polynomial`` model (``streak_model``, the default) adds
 ``FBP(L^3)`` and ``FBP(L P)``, P the path through the other non-air materials (the
-second-order terms of the deficit in the total attenuation), each with its own weight.
+second-order terms of the deficit in the total attenuation), each with its own weight, and
+is kept only where it leaves ``streak_min_gain`` less of the variance than the square
+model alone (else its extra terms fit other errors: clipping, scatter, edges).
 """
 from dataclasses import dataclass
 

@@ -209,7 +209,7 @@ class CorrectionParams(_Group):
     streak_min_explained: float = _param(0.05, "float", "a streak correction that removes "
                                          "less of the within-material variance is not "
                                          "applied", low=0.0, high=1.0)
-    streak_model: str = _param("square", "choice", "streak model: metal path length L "
+    streak_model: str = _param("polynomial", "choice", "streak model: metal path length L "
                                "squared, or also L cubed and L times the other materials' "
                                "path", choices=("square", "polynomial"), vtk="StreakModel")
     streak_min_gain: float = _param(0.2, "float", "polynomial model only where it removes this "
