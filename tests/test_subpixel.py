@@ -287,7 +287,10 @@ def test_volume_pipeline_moves_vertices_onto_a_sphere_and_keeps_labels():
     centre, radius = np.array(ph.features["centre"]), ph.features["radius"]
     dist = lambda p: np.abs(np.linalg.norm(p - centre, axis=1) - radius)
     iface = np.unique(on.interfaces)
-    assert dist(on.points[iface]).mean() < 0.7 * dist(off.points[iface]).mean()
+    # the moved vertices land on the sphere; the coarse-to-fine CVT already puts the
+    # interface vertices near it (0.17 voxel), so all of them gain less (0.13)
+    assert dist(on.points[went]).mean() < 0.5 * dist(off.points[went]).mean()
+    assert dist(on.points[iface]).mean() < dist(off.points[iface]).mean()
     assert on.diagnostics["element_quality"]["min_dihedral_deg"] >= 5.0 - 1e-9
     for s in on.surfaces:
         assert abs(s.enclosed_volume - s.element_volume) < 1e-9 * s.element_volume
