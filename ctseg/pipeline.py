@@ -47,6 +47,20 @@ def stage_runner(report, times, peaks_mib=None):
     return timed
 
 
+def monotone_progress(progress):
+    """``progress(fraction, stage)`` (or nothing) wrapped so that the share reported never
+    goes down: a stage that starts inside a range already reported by a nested loop (the
+    voxel Lloyd after the coarse one) keeps the share reached."""
+    if progress is None:
+        return lambda frac, stage: None
+    reached = [0.0]
+
+    def report(frac, stage):
+        reached[0] = max(reached[0], float(frac))
+        progress(reached[0], stage)
+    return report
+
+
 def default_n_sites(shape, pixels_per_site=DEFAULTS.pixels_per_site):
     """The size rule of the number of CVT sites: one per ``pixels_per_site`` pixels, at
     least 16 and at most one per pixel (``site_rule='area'``; the least that
@@ -191,7 +205,7 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
     check_memory(slice_bytes(*img.shape), f"segmenting a {img.shape[0]} x {img.shape[1]} slice",
                  "crop or downsample it")
     times = {}
-    report = progress or (lambda frac, stage: None)
+    report = monotone_progress(progress)
     timed = stage_runner(report, times)
 
     streaks = None

@@ -12,7 +12,7 @@ from .beam_hardening import correct_streaks
 from .errors import InputError
 from .levels import volume_levels
 from .params import AUTO, resolve
-from .pipeline import stage_runner
+from .pipeline import monotone_progress, stage_runner
 from .resources import SITE_3D_BYTES, VOLUME_3D_BYTES_PER_VOXEL, check_memory
 from .stages3d import (cvt_sites_3d, default_n_sites_3d, density_3d,  # noqa: F401 (re-export)
                        label_tetrahedra, n_sites_3d, subpixel_boundary_3d, tetrahedra_3d)
@@ -163,7 +163,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     vol = as_volume(volume)
     check_shape_3d(vol.shape)
     sp = check_spacing((1.0, 1.0, 1.0) if spacing is None else spacing)
-    report = progress or (lambda frac, stage: None)
+    report = monotone_progress(progress)
     times, peaks = {}, {}
     timed = stage_runner(report, times, peaks)
 

@@ -24,7 +24,19 @@ def tetra_labels(seg, shape):
 @pytest.fixture(scope="module")
 def part():
     ph = make_volume(16, 96, seed=3)
-    return ph, ctseg.segment_volume(ph.image, mode="3d", n_sites=3000)
+    steps = []
+    seg = ctseg.segment_volume(ph.image, mode="3d", n_sites=3000,
+                               progress=lambda frac, stage: steps.append((frac, stage)))
+    seg.progress_steps = steps
+    return ph, seg
+
+
+def test_progress_never_goes_back(part):
+    # the coarse Lloyd reports into the CVT's range before the voxel Lloyd starts
+    fracs = [f for f, _ in part[1].progress_steps]
+    stages = [s for _, s in part[1].progress_steps]
+    assert fracs[0] == 0.0 and fracs[-1] == 1.0 and fracs == sorted(fracs), fracs
+    assert stages.index("coarse_cvt") < stages.index("cvt") < stages.index("tetrahedra")
 
 
 def test_tetrahedra_fill_the_box_and_surfaces_close(part):
