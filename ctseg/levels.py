@@ -23,6 +23,13 @@ def weighted_percentile(values, weights, q):
     """Percentile(s) q (0-100) of values weighted by weights (step-function inverse CDF)."""
     v = np.asarray(values, float)
     w = np.asarray(weights, float)
+    if len(w) and np.all(w == w[0]):
+        # equal weights (pixels, voxels): the same cumulative sums in any order, so the
+        # k-th smallest value by selection, not a sort of millions of voxels
+        cw = np.cumsum(w)
+        cw /= cw[-1]
+        idx = np.clip(np.searchsorted(cw, np.asarray(q, float) / 100.0, side="left"), 0, len(v) - 1)
+        return np.partition(v, np.unique(idx))[idx]
     o = np.argsort(v, kind="stable")
     cw = np.cumsum(w[o])
     cw /= cw[-1]

@@ -19,6 +19,19 @@ def test_weighted_percentile_matches_repeated_samples():
         assert got == ref
 
 
+@pytest.mark.parametrize("n", [1, 2, 7, 500])
+def test_weighted_percentile_of_equal_weights_is_the_sorted_one(n):
+    # equal weights take a selection instead of a sort: the same value, ties included
+    rng = np.random.default_rng(n)
+    v = np.round(rng.normal(size=n), 1)
+    for w in (np.ones(n), np.full(n, 0.3)):
+        cw = np.cumsum(w)
+        cw = cw / cw[-1]
+        for q in ([1.0, 99.0], [0.0, 100.0], 50.0, [30.0, 30.0, 0.1]):
+            idx = np.clip(np.searchsorted(cw, np.asarray(q) / 100.0), 0, n - 1)
+            np.testing.assert_array_equal(weighted_percentile(v, w, q), np.sort(v)[idx])
+
+
 def test_material_modes_finds_separated_levels():
     rng = np.random.default_rng(2)
     v = np.concatenate([rng.normal(5, 1.5, 4000), rng.normal(25, 1.5, 400), rng.normal(60, 2, 3000),
