@@ -124,28 +124,23 @@ many voxel-noise units to the graph cut: there a tetrahedron's offset from the h
 gray is as much streak, cupping and correlated noise as partial volume (README, Method:
 what the gate is worth on the sample volume)."""
 
-ISO50_NOISE_K = 3.0
-""":func:`relabel_beyond_iso50` moves a tetrahedron only when its gray lies this many
-standard errors of its mean beyond the half-way gray."""
-
-
-def relabel_beyond_iso50(gray_255, material, level_255, adjacency, n_voxels, noise_255,
-                         max_rounds=8):
+def relabel_beyond_iso50(gray_255, material, level_255, adjacency, noise_255, max_rounds=8):
     """Tetrahedra whose gray lies beyond the half-way gray (ISO-50) between their material's
     level and the adjacent level of a face neighbour's material take that material.
 
     The graph cut's neighbour terms close narrow gaps between two materials (in 3D the
     tetrahedra along a thin air gap share many faces with the grains on either side), and
-    the recursive cut's pocket rules absorb small pieces; a tetrahedron's mean gray
-    averages its voxels, so its noise is ``noise_255 / sqrt(n_voxels)``, and a tetrahedron
-    beyond ISO-50 by more than :data:`ISO50_NOISE_K` of those is more of the neighbour's
-    material than of its own (the rule the hand reference of a two-phase scan applies).
-    Only materials adjacent in level order are considered (a mixture of air and aluminium
-    reads as polymer: the mixed-tetrahedron rule decides those), at least
-    :data:`ISO50_MIN_CONTRAST` noise units apart, and only a material a face neighbour has.
-    Repeated on the updated labels until nothing moves (at most ``max_rounds``), a
-    tetrahedron moving once at most: a narrow gap reopens from its sides inwards, but a
-    mixture never walks down the levels one material at a time.
+    the recursive cut's pocket rules absorb small pieces; a tetrahedron on the boundary
+    whose mean gray lies beyond ISO-50 is more of the neighbour's material than of its own
+    (the rule the hand reference of a two-phase scan applies, per element). No noise
+    margin: beyond ISO-50 the neighbour's material is the likelier one for the element's
+    mean, and a margin of 1-3 standard errors of that mean left the gaps half closed
+    (README, *Granular volumes with known truth*). Only materials adjacent in level order
+    are considered (a mixture of air and aluminium reads as polymer: the mixed-tetrahedron
+    rule decides those), at least :data:`ISO50_MIN_CONTRAST` noise units apart, and only a
+    material a face neighbour has. Repeated on the updated labels until nothing moves (at
+    most ``max_rounds``), a tetrahedron moving once at most: a narrow gap reopens from its
+    sides inwards, but a mixture never walks down the levels one material at a time.
 
     Parameters
     ----------
@@ -156,10 +151,8 @@ def relabel_beyond_iso50(gray_255, material, level_255, adjacency, n_voxels, noi
     level_255 : (K,) array_like, ascending
     adjacency : (a, 2) int array_like
         Tetrahedra sharing a face.
-    n_voxels : (m,) array_like
-        Each tetrahedron's volume in voxels.
     noise_255 : float
-        Noise of one voxel.
+        Noise of one voxel (the contrast gate's unit).
     max_rounds : int
 
     Returns
@@ -171,7 +164,7 @@ def relabel_beyond_iso50(gray_255, material, level_255, adjacency, n_voxels, noi
     Example
     -------
     >>> relabel_beyond_iso50([10.0, 40.0, 90.0], [0, 1, 1], [0.0, 100.0], [[0, 1], [1, 2]],
-    ...                      [20.0, 20.0, 20.0], 5.0)[0].tolist()
+    ...                      5.0)[0].tolist()
     [0, 0, 1]
     """
     f = np.asarray(gray_255, float)
@@ -181,7 +174,6 @@ def relabel_beyond_iso50(gray_255, material, level_255, adjacency, n_voxels, noi
     adj = np.asarray(adjacency, np.int64).reshape(-1, 2)
     if len(level) < 2 or len(adj) == 0:
         return mat, 0
-    tol = ISO50_NOISE_K * noise_255 / np.sqrt(np.maximum(np.asarray(n_voxels, float), 1e-12))
     for _ in range(max_rounds):
         new = mat.copy()
         for i, j in ((adj[:, 0], adj[:, 1]), (adj[:, 1], adj[:, 0])):
@@ -189,7 +181,7 @@ def relabel_beyond_iso50(gray_255, material, level_255, adjacency, n_voxels, noi
             mid = 0.5 * (level[mi] + level[mj])
             beyond = np.where(mj > mi, f[i] - mid, mid - f[i])
             contrast = np.abs(level[mi] - level[mj]) >= ISO50_MIN_CONTRAST * noise_255
-            move = ((np.abs(mi - mj) == 1) & contrast & (beyond > tol[i])
+            move = ((np.abs(mi - mj) == 1) & contrast & (beyond > 0.0)
                     & (mat[i] == start[i]))
             new[i[move]] = mj[move]
         if np.array_equal(new, mat):

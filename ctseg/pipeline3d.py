@@ -134,7 +134,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     (:func:`ctseg.levels3d.checked_levels`; ``diagnostics["levels"]`` says which).
     Tetrahedra straddling a boundary whose voxels mostly vote for other materials are
     relabelled (:func:`ctseg.mixed_tetra.relabel_mixed`; ``diagnostics["relabelled_mixed"]``),
-    and between two materials of high contrast a tetrahedron whose gray lies clearly beyond
+    and between two materials of high contrast a boundary tetrahedron whose gray lies beyond
     the half-way gray takes its neighbour's material (:func:`ctseg.mixed_tetra.relabel_beyond_iso50`;
     ``diagnostics["relabelled_iso50"]``).
     Pieces of a material touching along an edge only are joined or separated by

@@ -379,7 +379,7 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
     # the voxel noise from the flat voxels' 3 x 3 means (pixel_sigma): differences of
     # neighbouring voxels would count the edges too, which on a porous volume are many
     material, beyond = run("iso50_relabel", 0.895, relabel_beyond_iso50, f255, material,
-                           levels, mesh.adjacency, volume_vox, 3.0 * pixel_sigma)
+                           levels, mesh.adjacency, 3.0 * pixel_sigma)
     if p.n_materials != AUTO and p.gray_levels == AUTO:  # the K materials asked for get elements
         material = claim_missing_levels(f255, material, levels, mesh.adjacency)
     material, relabelled = run("manifold_repair", 0.9, repair_pinched_edges, mesh, material,

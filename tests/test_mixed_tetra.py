@@ -90,31 +90,31 @@ def test_sample_volume_polymer_gains(monkeypatch):
 
 
 # ------------------------------------------------------------ relabel_beyond_iso50
-def test_iso50_rule_moves_clear_cases_once_between_adjacent_contrasted_levels():
+def test_iso50_rule_moves_boundary_elements_once_between_adjacent_contrasted_levels():
     from ctseg.mixed_tetra import relabel_beyond_iso50
 
     lv = [0.0, 100.0, 200.0]
     chain = [[0, 1], [1, 2], [2, 3]]
-    n_vox = [16.0] * 4
-    # tetrahedron 1 (material 1, gray 20) lies far below mid(0, 1) = 50: it joins air
-    new, changed = relabel_beyond_iso50([0.0, 20.0, 100.0, 100.0], [0, 1, 1, 1], lv, chain,
-                                        n_vox, 2.0)
+    # tetrahedron 1 (material 1, gray 20) lies below mid(0, 1) = 50: it joins air
+    new, changed = relabel_beyond_iso50([0.0, 20.0, 100.0, 100.0], [0, 1, 1, 1], lv, chain, 2.0)
     assert new.tolist() == [0, 0, 1, 1] and changed == 1
-    # within the noise of its mean (3 x 8 / 4 = 6 gray levels) it stays
-    assert relabel_beyond_iso50([0.0, 46.0, 100.0, 100.0], [0, 1, 1, 1], lv, chain, n_vox,
-                                8.0)[1] == 0
+    # just below ISO-50 is beyond it too; on it or above, it stays
+    assert relabel_beyond_iso50([0.0, 49.0, 100.0, 100.0], [0, 1, 1, 1], lv, chain, 2.0)[1] == 1
+    assert relabel_beyond_iso50([0.0, 50.0, 100.0, 100.0], [0, 1, 1, 1], lv, chain, 2.0)[1] == 0
+    assert relabel_beyond_iso50([0.0, 51.0, 100.0, 100.0], [0, 1, 1, 1], lv, chain, 2.0)[1] == 0
     # levels closer than ISO50_MIN_CONTRAST noise units: left to the graph cut
-    assert relabel_beyond_iso50([0.0, 20.0, 100.0, 100.0], [0, 1, 1, 1], lv, chain, n_vox,
-                                11.0)[1] == 0
+    assert relabel_beyond_iso50([0.0, 20.0, 100.0, 100.0], [0, 1, 1, 1], lv, chain, 11.0)[1] == 0
     # materials 0 and 2 are not adjacent in level order: a mixture reading low stays
-    assert relabel_beyond_iso50([0.0, 20.0, 200.0, 200.0], [0, 2, 2, 2], lv, chain, n_vox,
-                                2.0)[1] == 0
+    assert relabel_beyond_iso50([0.0, 20.0, 200.0, 200.0], [0, 2, 2, 2], lv, chain, 2.0)[1] == 0
     # no neighbour of the other material: nothing to join
-    assert relabel_beyond_iso50([20.0, 20.0], [1, 1], lv, [[0, 1]], [16.0, 16.0], 2.0)[1] == 0
+    assert relabel_beyond_iso50([20.0, 20.0], [1, 1], lv, [[0, 1]], 2.0)[1] == 0
     # a tetrahedron moves once: 2 -> 1 in one round, never on to 0
-    new, _ = relabel_beyond_iso50([0.0, 100.0, 10.0], [0, 1, 2], lv, [[0, 2], [1, 2]],
-                                  [16.0] * 3, 2.0)
+    new, _ = relabel_beyond_iso50([0.0, 100.0, 10.0], [0, 1, 2], lv, [[0, 2], [1, 2]], 2.0)
     assert new.tolist() == [0, 1, 1]
+    # a narrow gap reopens from its sides inwards over the rounds
+    gap = relabel_beyond_iso50([0.0, 30.0, 30.0, 30.0, 0.0], [0, 1, 1, 1, 0], lv,
+                               [[0, 1], [1, 2], [2, 3], [3, 4]], 2.0)[0]
+    assert gap.tolist() == [0, 0, 0, 0, 0]
 
 
 def test_iso50_rule_reopens_narrow_gaps_of_a_granular_volume(monkeypatch):
