@@ -21,20 +21,15 @@ LEVEL_KEYS = ("gray_levels", "flat_sigma_px", "density_floor", "density_saturati
 
 def weighted_percentile(values, weights, q):
     """Percentile(s) q (0-100) of values weighted by weights (step-function inverse CDF)."""
-    v = np.asarray(values, float)
-    w = np.asarray(weights, float)
-    if len(w) and np.all(w == w[0]):
-        # equal weights (pixels, voxels): the same cumulative sums in any order, so the
-        # k-th smallest value by selection, not a sort of millions of voxels
-        cw = np.cumsum(w)
-        cw /= cw[-1]
-        idx = np.clip(np.searchsorted(cw, np.asarray(q, float) / 100.0, side="left"), 0, len(v) - 1)
-        return np.partition(v, np.unique(idx))[idx]
-    o = np.argsort(v, kind="stable")
-    cw = np.cumsum(w[o])
+    v, w = np.asarray(values, float), np.asarray(weights, float)
+    # equal weights (voxels): the same cumulative sums unsorted, and the k-th smallest by
+    # selection instead of a sort of millions of values
+    equal = len(w) > 0 and np.all(w == w[0])
+    o = None if equal else np.argsort(v, kind="stable")
+    cw = np.cumsum(w if equal else w[o])
     cw /= cw[-1]
-    idx = np.searchsorted(cw, np.asarray(q, float) / 100.0, side="left")
-    return v[o][np.clip(idx, 0, len(v) - 1)]
+    idx = np.clip(np.searchsorted(cw, np.asarray(q, float) / 100.0, side="left"), 0, len(v) - 1)
+    return np.partition(v, np.unique(idx))[idx] if equal else v[o][idx]
 
 
 def weighted_spread(values, weights):
@@ -43,13 +38,10 @@ def weighted_spread(values, weights):
     Trimmed rather than median-based: the spread of a whole material's triangle grays
     includes streaks and cupping, which a median absolute deviation would hide.
     """
-    v = np.asarray(values, float)
-    w = np.asarray(weights, float)
+    v, w = np.asarray(values, float), np.asarray(weights, float)
     lo, hi = weighted_percentile(v, w, [1.0, 99.0])
     keep = (v >= lo) & (v <= hi)
-    if keep.sum() < 2:
-        return 0.0
-    return float(np.sqrt(weighted_variance(v[keep], w[keep])))
+    return float(np.sqrt(weighted_variance(v[keep], w[keep]))) if keep.sum() >= 2 else 0.0
 
 
 def material_modes(gray, area, bandwidth, min_area, separation, n_modes=None):
