@@ -14,10 +14,15 @@ extra (matplotlib).
 import argparse
 import json
 import os
+import sys
 
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+from run import slope  # noqa: E402  (the benchmarks' one log-log slope)
+
 RESULTS = os.path.join(HERE, "results")
 LABELS = {"ctseg_3d": "ctseg 3D", "ctseg_slices": "ctseg slices", "otsu": "multi-Otsu\n+ SurfaceNets",
           "graphcut": "voxel graph cut\n+ SurfaceNets", "cgal": "CGAL Mesh_3\non the cut",
@@ -30,11 +35,6 @@ def scaling_rows(res):
              c["methods"]["ctseg_3d"]["peak_mib"]) for c in res["cases"]
             if c["seed"] == 0 and "wall_s" in c["methods"].get("ctseg_3d", {})]
     return sorted(rows)
-
-
-def slope(x, y):
-    """Least-squares slope of log y against log x."""
-    return float(np.polyfit(np.log(x), np.log(y), 1)[0])
 
 
 def method_rows(results, size):

@@ -53,11 +53,12 @@ def monotone_progress(progress):
     voxel Lloyd after the coarse one) keeps the share reached."""
     if progress is None:
         return lambda frac, stage: None
-    reached = [0.0]
+    reached = 0.0
 
     def report(frac, stage):
-        reached[0] = max(reached[0], float(frac))
-        progress(reached[0], stage)
+        nonlocal reached
+        reached = max(reached, float(frac))
+        progress(reached, stage)
     return report
 
 
