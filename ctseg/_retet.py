@@ -14,10 +14,16 @@ everything again. Private: :func:`ctseg.tetrahedra.perturb_slivers` is the entry
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import Delaunay, QhullError, cKDTree
 
 # the faces of tetrahedron (0, 1, 2, 3), as in ctseg.tetrahedra
 _FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+
+_QHULL_JITTER = 1e-10
+"""Qhull triangulates a copy of the sites moved by up to this share of the box's diagonal:
+exactly coplanar sites on the box's faces (and near-cospherical near-regular ones) send it
+into its slow facet merging, four times the time of as many sites inside; the copy's
+tetrahedra are the exact sites' wherever those are not flat."""
 
 _SPHERE_MARGIN = 1e-6
 """A tetrahedron whose circumsphere a moved site misses by less than this share of its
@@ -37,7 +43,34 @@ def flat_off_face(pts, tets, vol, box, flat_rel):
     return flat, ~_on_box(pts[tets[flat]], box)
 
 
-def _spheres(pts, tets):
+def delaunay_simplices(pts, box, options, flat_rel):
+    """Qhull's Delaunay tetrahedra of ``pts`` (indices, (m, 4)), found on a copy moved by up
+    to :data:`_QHULL_JITTER` of the box's diagonal (a fixed random draw) and oriented
+    positively there. Where a tetrahedron that is not flat (|volume| above ``flat_rel`` of
+    the mean) has a negative volume at the exact sites, the exact sites are triangulated
+    instead. Flat tetrahedra come out as Qhull gives them, for the caller to sort out.
+
+    Raises
+    ------
+    scipy.spatial.QhullError
+        Qhull fails on the exact sites too.
+    """
+    size = _QHULL_JITTER * float(np.linalg.norm(box))
+    copy = pts + np.random.default_rng(0).uniform(-size, size, pts.shape)
+    try:
+        tets = Delaunay(copy, qhull_options=options).simplices.astype(np.int64)
+    except QhullError:
+        tets = None
+    if tets is not None:
+        neg = _volumes(copy, tets) < 0
+        tets[neg] = tets[neg][:, [0, 2, 1, 3]]
+        vol = _volumes(pts, tets)
+        if not np.any(vol < -flat_rel * max(np.abs(vol).mean(), 1e-300)):
+            return tets
+    return Delaunay(pts, qhull_options=options).simplices.astype(np.int64)
+
+
+def circumspheres(pts, tets):
     """Circumcentres and radii; a flat tetrahedron gets an infinite radius."""
     p = pts[tets]
     a, b, c = (p[:, i] - p[:, 0] for i in (1, 2, 3))
@@ -56,7 +89,7 @@ def _face_keys(tets):
     return np.sort(tets[:, _FACES].reshape(-1, 3), axis=1)
 
 
-def local_delaunay(old, new, tets, moved, box, options, flat_rel):
+def local_delaunay(old, new, tets, moved, box, options, flat_rel, spheres=None):
     """The Delaunay tetrahedra of sites ``new`` from those (``tets``) of ``old``, where
     only the sites ``moved`` differ.
 
@@ -72,6 +105,9 @@ def local_delaunay(old, new, tets, moved, box, options, flat_rel):
         Qhull options.
     flat_rel : float
         As :data:`ctseg.tetrahedra.FLAT_REL`.
+    spheres : (centres, radii), optional
+        :func:`circumspheres` of ``tets`` at ``old``, if known (a caller that updates
+        them with the tetrahedra saves computing them all every round).
 
     Returns
     -------
@@ -84,7 +120,7 @@ def local_delaunay(old, new, tets, moved, box, options, flat_rel):
     moved = np.asarray(moved, np.int64)
     if not len(moved):
         return np.ones(len(tets), bool), np.zeros((0, 4), np.int64)
-    centre, radius = _spheres(old, tets)
+    centre, radius = circumspheres(old, tets) if spheres is None else spheres
     dist = cKDTree(new[moved]).query(centre)[0]
     is_moved = np.zeros(len(new), bool)
     is_moved[moved] = True
@@ -94,10 +130,9 @@ def local_delaunay(old, new, tets, moved, box, options, flat_rel):
     if len(local) < 5:
         return None, None
     try:
-        tri = Delaunay(new[local], qhull_options=options)
+        lt = local[delaunay_simplices(new[local], box, options, flat_rel)]
     except Exception:  # noqa: BLE001 (Qhull's errors: triangulate everything instead)
         return None, None
-    lt = local[tri.simplices.astype(np.int64)]
     vol = _volumes(new, lt)
     lt[vol < 0] = lt[vol < 0][:, [0, 2, 1, 3]]
     vol = np.abs(vol)
@@ -151,12 +186,19 @@ def _on_box(tri, box):
 
 
 def _in_any(points, cells):
-    """Whether each point lies in (or on) one of the tetrahedra ``cells`` (c, 4, 3)."""
+    """Whether each point lies in (or on) one of the tetrahedra ``cells`` (c, 4, 3).
+
+    Only the cells whose centroid lies within the largest centroid-to-corner distance of
+    the point can hold it; those are tested."""
     out = np.zeros(len(points), bool)
+    if not len(cells) or not len(points):
+        return out
     base = cells[:, 0]
     inv = np.linalg.pinv(np.transpose(cells[:, 1:] - base[:, None], (0, 2, 1)))
-    for i, x in enumerate(points):
-        lam = np.einsum("cij,cj->ci", inv, x - base)
-        ok = (lam >= -1e-9).all(axis=1) & (lam.sum(axis=1) <= 1.0 + 1e-9)
-        out[i] = ok.any()
+    centroid = cells.mean(axis=1)
+    reach = 1.001 * float(np.linalg.norm(cells - centroid[:, None], axis=2).max())
+    for i, near in enumerate(cKDTree(centroid).query_ball_point(points, reach)):
+        c = np.asarray(near, np.int64)
+        lam = np.einsum("cij,cj->ci", inv[c], points[i] - base[c])
+        out[i] = np.any((lam >= -1e-9).all(axis=1) & (lam.sum(axis=1) <= 1.0 + 1e-9))
     return out

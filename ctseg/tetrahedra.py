@@ -3,9 +3,8 @@ their quality."""
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import Delaunay
 
-from ._retet import flat_off_face, local_delaunay
+from ._retet import circumspheres, delaunay_simplices, flat_off_face, local_delaunay
 from .errors import MeshCheckError
 
 # |volume| below this share of the mean tetrahedron volume counts as flat (zero volume
@@ -159,8 +158,7 @@ def delaunay_tetrahedra(sites, box):
     box = np.asarray(box, float)
     size = 1e-6 * float(np.linalg.norm(box))
     for attempt in range(4):
-        tri = Delaunay(pts, qhull_options=QHULL_OPTIONS)
-        tets = tri.simplices.astype(np.int64)
+        tets = delaunay_simplices(pts, box, QHULL_OPTIONS, FLAT_REL)
         vol = tetra_volumes(pts, tets)
         neg = vol < 0
         tets[neg] = tets[neg][:, [0, 2, 1, 3]]
@@ -213,6 +211,21 @@ def dihedral_angles(points, tetrahedra):
     return out
 
 
+def _shortest_edges(pts, tets, which):
+    """The length of the shortest edge at each vertex ``which``: over the tetrahedra that
+    hold one of them (every edge at a vertex is in one)."""
+    mark = np.zeros(len(pts), bool)
+    mark[which] = True
+    near = tets[mark[tets].any(axis=1)]
+    edges = np.concatenate([near[:, [i, j]] for i, j in
+                            ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
+    length = np.linalg.norm(pts[edges[:, 0]] - pts[edges[:, 1]], axis=1)
+    shortest = np.full(len(pts), np.inf)
+    np.minimum.at(shortest, edges[:, 0], length)
+    np.minimum.at(shortest, edges[:, 1], length)
+    return shortest[which]
+
+
 def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
     """Move the vertices of slivers a little and triangulate again, keeping the best.
 
@@ -252,6 +265,7 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
     best_pts, best_tets, best_mesh = first.points, first.tetrahedra, first
     angle = dihedral_angles(best_pts, best_tets).min(axis=1)
     best_key = (int(np.sum(angle < min_dihedral_deg)), -float(angle.min()))
+    spheres = circumspheres(best_pts, best_tets)
     rng = np.random.default_rng(seed)
     tol = 1e-9 * np.maximum(box, 1.0)
     for _ in range(rounds):
@@ -259,21 +273,19 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
             break
         pts = best_pts.copy()
         bad = np.unique(best_tets[angle < min_dihedral_deg])
-        edges = np.concatenate([best_tets[:, [i, j]] for i, j in
-                                ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
-        length = np.linalg.norm(pts[edges[:, 0]] - pts[edges[:, 1]], axis=1)
-        shortest = np.full(len(pts), np.inf)
-        np.minimum.at(shortest, edges[:, 0], length)
-        np.minimum.at(shortest, edges[:, 1], length)
+        shortest = _shortest_edges(pts, best_tets, bad)
         free = ~((np.abs(pts[bad]) <= tol) | (np.abs(pts[bad] - box) <= tol))
-        step = rng.uniform(-SLIVER_STEP, SLIVER_STEP, (len(bad), 3)) * shortest[bad, None] * free
+        step = rng.uniform(-SLIVER_STEP, SLIVER_STEP, (len(bad), 3)) * shortest[:, None] * free
         pts[bad] = np.clip(pts[bad] + step, 0.0, box)
         keep, added = local_delaunay(best_pts, pts, best_tets, bad, box, QHULL_OPTIONS,
-                                     FLAT_REL)
-        mesh = None
+                                     FLAT_REL, spheres)
+        mesh, sph = None, None
         if added is not None:
             tets = np.vstack([best_tets[keep], added])
             a = np.concatenate([angle[keep], dihedral_angles(pts, added).min(axis=1)])
+            # the kept tetrahedra's vertices did not move: their spheres stay
+            sph = tuple(np.concatenate([kept[keep], fresh])
+                        for kept, fresh in zip(spheres, circumspheres(pts, added)))
         else:
             try:
                 mesh = delaunay_tetrahedra(pts, box)
@@ -284,6 +296,7 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
         key = (int(np.sum(a < min_dihedral_deg)), -float(a.min()))
         if key < best_key:
             best_pts, best_tets, best_mesh, angle, best_key = pts, tets, mesh, a, key
+            spheres = circumspheres(pts, tets) if sph is None else sph
     if best_mesh is None:
         try:
             best_mesh = _checked_mesh(best_pts, best_tets, tetra_volumes(best_pts, best_tets), box)

@@ -171,3 +171,70 @@ def test_sliver_perturbation_gives_the_mesh_of_whole_triangulations():
     assert len(mesh.tetrahedra) == len(best.tetrahedra)
     assert tetra_volumes(mesh.points, mesh.tetrahedra).min() > 0
     assert left == key[0]
+
+
+def _random_box_sites(seed=2):
+    """Random sites inside a box and ten on each face (in their planes, exactly)."""
+    box = np.array([10.0, 8.0, 6.0])
+    rng = np.random.default_rng(seed)
+    face = rng.uniform(0, 1, (60, 3)) * box
+    axis = np.arange(60) % 3
+    face[np.arange(60), axis] = np.where(np.arange(60) % 2, box[axis], 0.0)
+    return np.vstack([_corners(box), rng.uniform(0, 1, (400, 3)) * box, face]), box
+
+
+def _exact_qhull_set(sites, box):
+    """The tetrahedra of Qhull on the exact sites, the flat ones left out (the rule before
+    Qhull was given a moved copy)."""
+    from scipy.spatial import Delaunay
+
+    from ctseg.tetrahedra import FLAT_REL, QHULL_OPTIONS
+    tets = Delaunay(sites, qhull_options=QHULL_OPTIONS).simplices
+    vol = np.abs(tetra_volumes(sites, tets))
+    return _tet_set(tets[vol > FLAT_REL * vol.mean()])
+
+
+def test_qhull_on_a_moved_copy_gives_the_tetrahedra_of_the_exact_sites():
+    """Qhull runs on a copy of the sites moved by 1e-10 of the box (coplanar face sites
+    make it slow): the tetrahedra are those of the exact sites, with exact points."""
+    sites, box = _random_box_sites()
+    mesh = delaunay_tetrahedra(sites, box)
+    np.testing.assert_array_equal(mesh.points, sites)
+    assert _tet_set(mesh.tetrahedra) == _exact_qhull_set(sites, box)
+
+
+def test_a_copy_moved_too_far_falls_back_to_the_exact_sites(monkeypatch):
+    """Where the moved copy's tetrahedra are inverted at the exact sites (a move far beyond
+    round-off), the exact sites are triangulated: still their Delaunay tetrahedra."""
+    import ctseg._retet as retet
+    from ctseg.tetrahedra import FLAT_REL, QHULL_OPTIONS
+    sites, box = _random_box_sites(seed=3)
+    monkeypatch.setattr(retet, "_QHULL_JITTER", 0.02)
+    tets = retet.delaunay_simplices(sites, box, QHULL_OPTIONS, FLAT_REL)
+    vol = np.abs(tetra_volumes(sites, tets))
+    assert _tet_set(tets[vol > FLAT_REL * vol.mean()]) == _exact_qhull_set(sites, box)
+    # the moved copy alone would have given other tetrahedra (the check above can fail)
+    size = 0.02 * np.linalg.norm(box)
+    from scipy.spatial import Delaunay
+    copy = sites + np.random.default_rng(0).uniform(-size, size, sites.shape)
+    assert _tet_set(Delaunay(copy, qhull_options=QHULL_OPTIONS).simplices) != _exact_qhull_set(sites, box)
+
+
+def test_point_in_tetrahedra_against_every_tetrahedron():
+    """The cavity test of the local update (candidate cells near each point) against the
+    test over every cell."""
+    from scipy.spatial import Delaunay
+
+    from ctseg._retet import _in_any
+    rng = np.random.default_rng(4)
+    pts = rng.uniform(0, 5, (60, 3))
+    cells = pts[Delaunay(pts).simplices]
+    cells = cells[rng.random(len(cells)) < 0.5]  # a cavity with holes
+    queries = np.vstack([rng.uniform(-1, 6, (300, 3)), cells.mean(axis=1)[:20], cells[:20, 0]])
+    base = cells[:, 0]
+    inv = np.linalg.inv(np.transpose(cells[:, 1:] - base[:, None], (0, 2, 1)))
+    lam = np.einsum("cij,qcj->qci", inv, queries[:, None] - base[None])
+    brute = ((lam >= -1e-9).all(axis=2) & (lam.sum(axis=2) <= 1 + 1e-9)).any(axis=1)
+    got = _in_any(queries, cells)
+    assert 0 < got.sum() < len(got)
+    np.testing.assert_array_equal(got, brute)
