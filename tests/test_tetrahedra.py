@@ -111,13 +111,7 @@ def test_local_update_gives_the_delaunay_tetrahedra_of_the_moved_sites(n_moved, 
     from ctseg._retet import local_delaunay
     from ctseg.tetrahedra import FLAT_REL, QHULL_OPTIONS
 
-    box = np.array([10.0, 8.0, 6.0])
-    rng = np.random.default_rng(2)
-    face = rng.uniform(0, 1, (60, 3)) * box
-    # ten sites on each face: a face of its four corners alone is a tie (cocircular)
-    axis = np.arange(60) % 3
-    face[np.arange(60), axis] = np.where(np.arange(60) % 2, box[axis], 0.0)
-    sites = np.vstack([_corners(box), rng.uniform(0, 1, (400, 3)) * box, face])
+    sites, box, rng = _random_box_sites(seed=2)
     old = delaunay_tetrahedra(sites, box)
     pool = np.arange(408, 468) if on_faces else np.arange(8, 408)
     moved = np.sort(rng.choice(pool, n_moved, replace=False))
@@ -174,13 +168,15 @@ def test_sliver_perturbation_gives_the_mesh_of_whole_triangulations():
 
 
 def _random_box_sites(seed=2):
-    """Random sites inside a box and ten on each face (in their planes, exactly)."""
+    """The corners, 400 random sites inside a box and ten on each face (in their planes,
+    exactly: a face of its four corners alone is a tie, cocircular); with the generator,
+    for draws that follow."""
     box = np.array([10.0, 8.0, 6.0])
     rng = np.random.default_rng(seed)
     face = rng.uniform(0, 1, (60, 3)) * box
     axis = np.arange(60) % 3
     face[np.arange(60), axis] = np.where(np.arange(60) % 2, box[axis], 0.0)
-    return np.vstack([_corners(box), rng.uniform(0, 1, (400, 3)) * box, face]), box
+    return np.vstack([_corners(box), rng.uniform(0, 1, (400, 3)) * box, face]), box, rng
 
 
 def _exact_qhull_set(sites, box):
@@ -197,7 +193,7 @@ def _exact_qhull_set(sites, box):
 def test_qhull_on_a_moved_copy_gives_the_tetrahedra_of_the_exact_sites():
     """Qhull runs on a copy of the sites moved by 1e-10 of the box (coplanar face sites
     make it slow): the tetrahedra are those of the exact sites, with exact points."""
-    sites, box = _random_box_sites()
+    sites, box, _ = _random_box_sites()
     mesh = delaunay_tetrahedra(sites, box)
     np.testing.assert_array_equal(mesh.points, sites)
     assert _tet_set(mesh.tetrahedra) == _exact_qhull_set(sites, box)
@@ -208,7 +204,7 @@ def test_a_copy_moved_too_far_falls_back_to_the_exact_sites(monkeypatch):
     round-off), the exact sites are triangulated: still their Delaunay tetrahedra."""
     import ctseg._retet as retet
     from ctseg.tetrahedra import FLAT_REL, QHULL_OPTIONS
-    sites, box = _random_box_sites(seed=3)
+    sites, box, _ = _random_box_sites(seed=3)
     monkeypatch.setattr(retet, "_QHULL_JITTER", 0.02)
     tets = retet.delaunay_simplices(sites, box, QHULL_OPTIONS, FLAT_REL)
     vol = np.abs(tetra_volumes(sites, tets))
