@@ -136,7 +136,11 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     relabelled (:func:`ctseg.mixed_tetra.relabel_mixed`; ``diagnostics["relabelled_mixed"]``),
     and between two materials of high contrast a boundary tetrahedron whose gray lies beyond
     the half-way gray takes its neighbour's material (:func:`ctseg.mixed_tetra.relabel_beyond_iso50`;
-    ``diagnostics["relabelled_iso50"]``).
+    ``diagnostics["relabelled_iso50"]``). A piece of a material that touches a darker
+    and a brighter one and holds no interior tetrahedron is their partial-volume mix and
+    takes the one nearest its gray, unless it is as large as a thin layer
+    (:func:`ctseg.partial_volume.relabel_partial_volume_pieces`;
+    ``diagnostics["relabelled_pieces"]``).
     Pieces of a material touching along an edge only are joined or separated by
     relabelling the tetrahedra around that edge (:func:`ctseg.surfaces.repair_pinched_edges`),
     so every surface is a closed manifold; ``diagnostics["relabelled_for_manifold"]``
@@ -240,6 +244,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "relabelled_for_manifold": labels.relabelled,
         "relabelled_mixed": labels.mixed_relabelled,
         "relabelled_iso50": labels.iso50_relabelled,
+        "relabelled_pieces": labels.pieces_relabelled,
         "subpixel_moved": int(n_moved),
         "element_quality": quality,
         "slivers_left": int(slivers),

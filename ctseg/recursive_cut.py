@@ -173,6 +173,13 @@ def order_by_gray(material, gray, area):
     return rank[inv], mean[order], used[order]
 
 
+def resolved_min_material_area(min_material_area, area):
+    """``min_material_area``, checked, with 'auto' resolved for elements of sizes ``area``:
+    a thousandth of their total, at least 16 pixels (voxels in 3D)."""
+    value = check("min_material_area", min_material_area)
+    return max(16.0, 1e-3 * float(np.sum(area))) if value == AUTO else value
+
+
 def segment_triangles(gray, area, adjacency, centroids, *,
                       step_threshold_255=DEFAULTS.step_threshold_255, merge_k=DEFAULTS.merge_k,
                       merge_rel=DEFAULTS.merge_rel, merge_floor_255=DEFAULTS.merge_floor_255,
@@ -300,9 +307,7 @@ def segment_triangles(gray, area, adjacency, centroids, *,
     merge_threshold = check("merge_threshold_255", merge_threshold_255)
     min_triangles = check("min_triangles", min_triangles)
     max_depth = check("max_depth", max_depth)
-    min_material_area = check("min_material_area", min_material_area)
-    if min_material_area == AUTO:
-        min_material_area = max(16.0, 1e-3 * area.sum())
+    min_material_area = resolved_min_material_area(min_material_area, area)
     min_pocket_area = check("min_pocket_area", min_pocket_area)
     n_materials = check("n_materials", n_materials)
     n_materials = None if n_materials == AUTO else n_materials

@@ -23,9 +23,9 @@ from .levels import volume_levels
 from .levels3d import checked_levels
 from .mixed_tetra import relabel_beyond_iso50, relabel_mixed
 from .params import AUTO, DEFAULTS, resolve
-from .partial_volume import claim_missing_levels
+from .partial_volume import claim_missing_levels, relabel_partial_volume_pieces
 from .pipeline import DENSITY_KEYS
-from .recursive_cut import order_by_gray, segment_triangles
+from .recursive_cut import order_by_gray, resolved_min_material_area, segment_triangles
 from .site_budget import site_budget_3d
 from .sites import initial_sites_3d
 from .subpixel import EDGE_PX, subpixel_mesh
@@ -266,10 +266,9 @@ class TetraLabels:
     graphcut_calls : int, of the last labelling
     blur_px : float or None, the fitted blur (None without blur correction)
     relabelled : int, tetrahedra relabelled for manifold surfaces
-    mixed_relabelled : int, mixed tetrahedra relabelled by their voxels
-        (:func:`ctseg.mixed_tetra.relabel_mixed`)
-    iso50_relabelled : int, tetrahedra beyond the half-way gray relabelled
-        (:func:`ctseg.mixed_tetra.relabel_beyond_iso50`)
+    mixed_relabelled, iso50_relabelled, pieces_relabelled : int, tetrahedra (pieces) relabelled
+        by :func:`ctseg.mixed_tetra.relabel_mixed`, :func:`ctseg.mixed_tetra.relabel_beyond_iso50`
+        and :func:`ctseg.partial_volume.relabel_partial_volume_pieces`
     levels_report : dict, how the levels were chosen (:func:`ctseg.levels3d.checked_levels`)
     """
 
@@ -284,6 +283,7 @@ class TetraLabels:
     levels_report: dict
     mixed_relabelled: int
     iso50_relabelled: int
+    pieces_relabelled: int
 
 
 def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=None, timed=None,
@@ -380,6 +380,9 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
     # neighbouring voxels would count the edges too, which on a porous volume are many
     material, beyond = run("iso50_relabel", 0.895, relabel_beyond_iso50, f255, material,
                            levels, mesh.adjacency, 3.0 * pixel_sigma)
+    layer_vox = 4.0 * resolved_min_material_area(p.min_material_area, volume_vox)
+    material, pieces = run("piece_relabel", 0.897, relabel_partial_volume_pieces, f255,
+                           material, levels, mesh.adjacency, volume_vox, interior, layer_vox)
     if p.n_materials != AUTO and p.gray_levels == AUTO:  # the K materials asked for get elements
         material = claim_missing_levels(f255, material, levels, mesh.adjacency)
     material, relabelled = run("manifold_repair", 0.9, repair_pinched_edges, mesh, material,
@@ -391,4 +394,5 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
                        scale=(offset, factor), pixel_sigma=pixel_sigma,
                        graphcut_calls=int(seg.graphcut_calls), blur_px=blur_px,
                        relabelled=int(relabelled), levels_report=levels_report,
-                       mixed_relabelled=int(mixed), iso50_relabelled=int(beyond))
+                       mixed_relabelled=int(mixed), iso50_relabelled=int(beyond),
+                       pieces_relabelled=int(pieces))

@@ -1,0 +1,65 @@
+"""Partial-volume pieces: a material between a darker and a brighter one, made of boundary
+elements only (ctseg.partial_volume.relabel_partial_volume_pieces)."""
+import os
+
+import numpy as np
+
+import ctseg.stages3d
+from ctseg.metrics import evaluate_tetra
+from ctseg.partial_volume import relabel_partial_volume_pieces
+from ctseg.pipeline3d import segment_volume_3d
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+LEVELS = [0.0, 50.0, 100.0]
+CHAIN = [[i, i + 1] for i in range(5)]  # six elements in a row
+
+
+def _relabel(f, material, interior, size=(1.0,) * 6, max_size=np.inf, adjacency=CHAIN):
+    return relabel_partial_volume_pieces(f, material, LEVELS, adjacency, size, interior, max_size)
+
+
+def test_a_boundary_piece_between_darker_and_brighter_takes_the_nearest_neighbour_level():
+    interior = [True, True, False, False, True, True]
+    new, changed = _relabel([0, 0, 40, 45, 100, 100], [0, 0, 1, 1, 2, 2], interior)
+    assert new.tolist() == [0, 0, 0, 0, 2, 2] and changed == 1
+    # nearer the brighter side by its size-weighted gray: the brighter one
+    new, _ = _relabel([0, 0, 55, 60, 100, 100], [0, 0, 1, 1, 2, 2], interior)
+    assert new.tolist() == [0, 0, 2, 2, 2, 2]
+    new, _ = _relabel([0, 0, 20, 80, 100, 100], [0, 0, 1, 1, 2, 2], interior, (1, 1, 1, 3, 1, 1))
+    assert new.tolist() == [0, 0, 2, 2, 2, 2]  # (20 + 3 x 80) / 4 = 65
+
+
+def test_pieces_with_an_interior_element_or_of_layer_size_or_on_one_side_stay():
+    material = [0, 0, 1, 1, 2, 2]
+    f = [0, 0, 40, 45, 100, 100]
+    # an interior element: a material of its own
+    assert _relabel(f, material, [True, True, True, False, True, True])[1] == 0
+    # as large as a thin layer
+    assert _relabel(f, material, [True, True, False, False, True, True], max_size=2.0)[1] == 0
+    assert _relabel(f, material, [True, True, False, False, True, True], max_size=2.01)[1] == 1
+    # darker on both sides: an inclusion, not a mix
+    assert _relabel([0, 0, 40, 45, 0, 0], [0, 0, 1, 1, 0, 0],
+                    [True, True, False, False, True, True])[1] == 0
+    # no interior element anywhere: nothing to tell a mix from a material
+    assert _relabel(f, material, [False] * 6)[1] == 0
+    # the darkest and brightest materials are never a mix of others
+    new, changed = _relabel([0, 60, 60, 100, 100, 40], [0, 2, 2, 1, 1, 0],
+                            [True, False, False, False, False, True])
+    assert new[1] == 2 and new[2] == 2
+
+
+def test_sample_volume_polymer_gains(monkeypatch):
+    import nrrd
+
+    image, _ = nrrd.read(os.path.join(ROOT, "sample_data", "part_volume.nrrd"), index_order="C")
+    truth = np.load(os.path.join(ROOT, "sample_data", "part_volume_truth.npy"))
+    seg = segment_volume_3d(image)
+    assert seg.diagnostics["relabelled_pieces"] > 0
+    with_rule = evaluate_tetra(seg, truth)
+    monkeypatch.setattr(ctseg.stages3d, "relabel_partial_volume_pieces", lambda f, m, *a: (m, 0))
+    without = evaluate_tetra(segment_volume_3d(image), truth)
+    # measured Dice 0.980 / 0.701 / 0.980 / 0.944 with the rule, 0.979 / 0.680 / 0.980 /
+    # 0.943 without (numpy 2.4); 0.984 / 0.746 / 0.981 / 0.925 with, 0.982 / 0.738 / 0.976
+    # / 0.930 without (numpy 1.24): polymer spikes along the housing's surface go
+    gain = np.array(with_rule["dice"]) - np.array(without["dice"])
+    assert gain[1] > 0.005 and gain.mean() > 0.0
