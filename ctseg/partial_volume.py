@@ -214,8 +214,11 @@ def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior
     element, touches both a material of a lower level and one of a higher level, and is
     smaller than ``max_size`` is a partial-volume mix of its neighbours, not a material
     of its own: air and aluminium average to polymer along a housing's surface, and the
-    blur halo of steel in air reads as aluminium. It takes the material, of those it
-    touches, whose level is nearest its size-weighted mean gray. A piece of ``max_size``
+    blur halo of steel in air reads as aluminium. A mix is made of its extremes (the blur
+    between two materials gives every gray between them), so it takes the darkest or the
+    brightest material it touches, whichever level is nearer its size-weighted mean gray:
+    never another material in between, which would only be a mix again. A piece of
+    ``max_size``
     or more is a thin layer (the recursive cut's thin-layer rule decides those); where
     no element is interior, nothing is relabelled.
 
@@ -268,11 +271,12 @@ def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior
     touches = np.zeros((n_pieces, len(level)), bool)
     for i, j in ((a[~same], b[~same]), (b[~same], a[~same])):
         touches[piece[i], mat[j]] = True
-    own = level[piece_mat][:, None]
-    between = ((touches & (level[None, :] < own)).any(axis=1)
-               & (touches & (level[None, :] > own)).any(axis=1))
-    nearest = np.argmin(np.where(touches, np.abs(level[None, :] - piece_gray[:, None]), np.inf),
-                        axis=1)
-    flip = between & ~has_interior & (piece_size < max_size) & (nearest != piece_mat)
+    idx = np.arange(len(level))
+    darkest = np.where(touches, idx, len(level)).min(axis=1)
+    brightest = np.where(touches, idx, -1).max(axis=1)
+    between = (darkest < piece_mat) & (brightest > piece_mat)
+    d, b = np.minimum(darkest, len(level) - 1), np.maximum(brightest, 0)
+    nearest = np.where(piece_gray - level[d] <= level[b] - piece_gray, d, b)
+    flip = between & ~has_interior & (piece_size < max_size)
     mat[flip[piece]] = nearest[piece[flip[piece]]]
     return mat, int(flip.sum())

@@ -138,7 +138,8 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     the half-way gray takes its neighbour's material (:func:`ctseg.mixed_tetra.relabel_beyond_iso50`;
     ``diagnostics["relabelled_iso50"]``). A piece of a material that touches a darker
     and a brighter one and holds no interior tetrahedron is their partial-volume mix and
-    takes the one nearest its gray, unless it is as large as a thin layer
+    takes the darkest or the brightest material it touches, whichever level is nearer its
+    gray, unless it is as large as a thin layer
     (:func:`ctseg.partial_volume.relabel_partial_volume_pieces`;
     ``diagnostics["relabelled_pieces"]``).
     Pieces of a material touching along an edge only are joined or separated by
