@@ -208,7 +208,7 @@ def claim_missing_levels(f, material, levels, adjacency):
 def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior,
                                   max_size=np.inf):
     """Pieces of a material between a darker and a brighter one, made of boundary
-    elements only, take the neighbouring material nearest their gray.
+    elements only, take the darkest or brightest material they touch.
 
     A piece is a connected set of elements of one material. One that has no interior
     element, touches both a material of a lower level and one of a higher level, and is
@@ -218,9 +218,8 @@ def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior
     between two materials gives every gray between them), so it takes the darkest or the
     brightest material it touches, whichever level is nearer its size-weighted mean gray:
     never another material in between, which would only be a mix again. A piece of
-    ``max_size``
-    or more is a thin layer (the recursive cut's thin-layer rule decides those); where
-    no element is interior, nothing is relabelled.
+    ``max_size`` or more is a thin layer (the recursive cut's thin-layer rule decides
+    those); where no element is interior, nothing is relabelled.
 
     Parameters
     ----------
