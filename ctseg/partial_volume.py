@@ -274,8 +274,8 @@ def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior
     darkest = np.where(touches, idx, len(level)).min(axis=1)
     brightest = np.where(touches, idx, -1).max(axis=1)
     between = (darkest < piece_mat) & (brightest > piece_mat)
-    d, b = np.minimum(darkest, len(level) - 1), np.maximum(brightest, 0)
-    nearest = np.where(piece_gray - level[d] <= level[b] - piece_gray, d, b)
+    dark, bright = np.minimum(darkest, len(level) - 1), np.maximum(brightest, 0)
+    nearest = np.where(piece_gray - level[dark] <= level[bright] - piece_gray, dark, bright)
     flip = between & ~has_interior & (piece_size < max_size)
     mat[flip[piece]] = nearest[piece[flip[piece]]]
     return mat, int(flip.sum())

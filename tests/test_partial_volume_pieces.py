@@ -18,7 +18,7 @@ def _relabel(f, material, interior, size=(1.0,) * 6, max_size=np.inf, adjacency=
     return relabel_partial_volume_pieces(f, material, LEVELS, adjacency, size, interior, max_size)
 
 
-def test_a_boundary_piece_between_darker_and_brighter_takes_the_nearest_neighbour_level():
+def test_a_boundary_piece_between_darker_and_brighter_takes_the_one_nearer_its_gray():
     interior = [True, True, False, False, True, True]
     new, changed = _relabel([0, 0, 40, 45, 100, 100], [0, 0, 1, 1, 2, 2], interior)
     assert new.tolist() == [0, 0, 0, 0, 2, 2] and changed == 1
