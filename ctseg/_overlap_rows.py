@@ -1,41 +1,29 @@
 """The compressed rows of a mesh's exact (tetrahedron, voxel) overlaps, recorded in
-parallel: the tetrahedra in fixed chunks, each chunk into its own stretch of one buffer
-sized by the expected cell count, then packed.
+parallel: the tetrahedra in fixed chunks, each chunk into buffers of its own sized by the
+expected cell count, then packed.
 
 A tetrahedron's row is what :func:`ctseg._tet_clip._record` makes of it alone, so the
 rows, and every sum over them, are the same whatever the chunking and the thread count.
 
+The chunks run on Python threads (the kernel releases the GIL), not in a numba ``prange``,
+which on two threads took 1.14x as long for the same rows (benchmarks/overlap_rows.py).
+
 Private: :class:`ctseg.tetra_gray.VoxelOverlaps` is the entry point.
 """
 import numpy as np
-from numba import njit, prange
 
 from ._tet_clip import _record
+from ._threads import thread_map
 
 _CHUNK_TETS = 2048
 """Tetrahedra per chunk: many chunks per thread even out their unequal costs; a few per
 chunk would waste the buffers' slack."""
 
 
-@njit(cache=True, parallel=True)
-def _record_chunks(P, nz, ny, nx, bounds, offsets, caps, ends, voxel, overlap, done):
-    """Chunk c (tetrahedra ``bounds[c]:bounds[c + 1]``) into ``voxel`` and ``overlap`` at
-    ``offsets[c]``, at most ``caps[c]`` entries; ``ends[t]``: the count of its chunk's
-    entries up to tetrahedron t included; ``done[c]``: :func:`_record`'s return (the
-    chunk's length when it fitted)."""
-    for c in prange(bounds.shape[0] - 1):
-        t0 = bounds[c]
-        t1 = bounds[c + 1]
-        local = np.zeros(t1 - t0 + 1, np.int64)
-        a = offsets[c]
-        done[c] = _record(P[t0:t1], nz, ny, nx, 0, local, voxel[a:a + caps[c]],
-                          overlap[a:a + caps[c]])
-        for t in range(t0, t1):
-            ends[t] = local[t - t0 + 1]
-
-
 def _record_growing(P, dims, itype, cap):
-    """One chunk alone, its buffers grown until it fits: (ends, voxel, overlap)."""
+    """One chunk, its buffers grown until it fits: (ends, voxel, overlap), ``ends[t]``
+    the count of the chunk's entries up to tetrahedron t included; ``(-1 - t, None,
+    None)`` if tetrahedron t outgrew the kernel's polyhedron buffers."""
     m = len(P)
     start = np.zeros(m + 1, np.int64)
     voxel, overlap = np.empty(cap, itype), np.empty(cap)
@@ -67,30 +55,36 @@ def overlap_rows(P, dims, expected):
     itype = np.int32 if int(np.prod(dims)) < 2 ** 31 else np.int64
     bounds = np.unique(np.r_[np.arange(0, m, _CHUNK_TETS), m]).astype(np.int64)
     cum = np.r_[0.0, np.cumsum(expected)]
-    # the expected count fills the buffers nearly exactly: rarely a chunk done again
+    # the expected count fills the buffers nearly exactly: rarely a chunk grown
     caps = (1.02 * (cum[bounds[1:]] - cum[bounds[:-1]])).astype(np.int64) + 256
     offsets = np.r_[0, np.cumsum(caps)[:-1]].astype(np.int64)
-    ends = np.zeros(m, np.int64)
     voxel, overlap = np.empty(int(caps.sum()), itype), np.empty(int(caps.sum()))
-    done = np.zeros(len(bounds) - 1, np.int64)
-    _record_chunks(P, *dims, bounds, offsets, caps, ends, voxel, overlap, done)
+
+    def chunk(c):  # (ends, None, None) when written in place, else as _record_growing
+        t0, t1, a, k = bounds[c], bounds[c + 1], offsets[c], caps[c]
+        start = np.zeros(t1 - t0 + 1, np.int64)
+        t = _record(P[t0:t1], *dims, 0, start, voxel[a:a + k], overlap[a:a + k])
+        if t == t1 - t0:
+            return start[1:], None, None
+        if t < 0:
+            return t, None, None
+        return _record_growing(P[t0:t1], dims, itype, int(2 * k))
+
+    done = thread_map(chunk, range(len(caps)))
+    for t0, (e, v, _) in zip(bounds, done):
+        if v is None and np.ndim(e) == 0:
+            return int(e) - t0, None, None
     pieces, start, q = [], np.zeros(m + 1, np.int64), 0
-    for c, (t0, t1) in enumerate(zip(bounds[:-1], bounds[1:])):
-        if done[c] < 0:  # tetrahedron t0 - 1 - done[c] outgrew the buffers
-            return int(done[c]) - t0, None, None
-        if done[c] == t1 - t0:
-            n = int(ends[t1 - 1])
-            pieces.append((voxel[offsets[c]:offsets[c] + n], overlap[offsets[c]:offsets[c] + n]))
-            start[t0 + 1:t1 + 1] = q + ends[t0:t1]
-        else:  # the chunk overflowed its stretch
-            e, v, o = _record_growing(P[t0:t1], dims, itype, int(2 * caps[c]))
-            if v is None:
-                return int(e) - t0, None, None
-            n = int(e[-1])
-            pieces.append((v[:n], o[:n]))
-            start[t0 + 1:t1 + 1] = q + e
+    for c, (e, v, o) in enumerate(done):
+        n = int(e[-1])
+        a = offsets[c]
+        pieces.append((voxel[a:a + n], overlap[a:a + n]) if v is None else (v[:n], o[:n]))
+        start[bounds[c] + 1:bounds[c + 1] + 1] = q + e
         q += n
-    if not pieces:
-        return start, np.empty(0, itype), np.empty(0)
+    if all(v is None for _, v, _ in done):  # packed in place: no second copy of the rows
+        for (pv, po), a in zip(pieces, np.r_[0, np.cumsum([len(pv) for pv, _ in pieces])]):
+            voxel[a:a + len(pv)] = pv
+            overlap[a:a + len(po)] = po
+        return start, voxel[:q], overlap[:q]
     return (start, np.concatenate([p[0] for p in pieces]),
             np.concatenate([p[1] for p in pieces]))

@@ -53,76 +53,73 @@ def _copy(pos, nb, n, out_pos, out_nb):
 
 
 @njit(cache=True)
-def _split(pos, nb, n, axis, c, bpos, bnb, apos, anb, wpos, wnb, side, newid):
-    """Split polyhedron (pos, nb, n) by the plane ``x_axis = c``.
+def _split(pos, nb, n, axis, c, bpos, bnb, side, newid):
+    """Split polyhedron (pos, nb, n) by the plane ``x_axis = c``, in place.
 
-    The part below goes to (bpos, bnb), the part above to (apos, anb); (wpos, wnb),
-    ``side`` and ``newid`` are work buffers. Returns the vertex counts (below, above);
-    0 for an empty part, (-1, -1) if the work buffer is too small. The input buffers may
-    be the same as neither output.
+    The part below goes to (bpos, bnb); the part above is left in (pos, nb), whose
+    buffers must hold the crossing vertices while they are made. ``side`` and ``newid``
+    are work buffers. Returns the vertex counts (below, above); 0 for an empty part,
+    (-1, -1) if the buffers are too small.
     """
     n_above = 0
     n_below = 0
     for v in range(n):
         s = pos[v, axis] - c
-        if s > 0:
-            n_above += 1
-        elif s < 0:
-            n_below += 1
+        side[v] = 1 if s < 0 else 0  # 1: below
+        n_above += s > 0
+        n_below += s < 0
     if n_above == 0:
         return _copy(pos, nb, n, bpos, bnb), 0
     if n_below == 0:
-        return 0, _copy(pos, nb, n, apos, anb)
-    for v in range(n):
-        side[v] = 1 if pos[v, axis] - c < 0 else 0  # 1: below
-    crossing = 0
-    for v in range(n):
-        for p in range(3):
-            crossing += side[v] == 0 and side[nb[v, p]] == 1
-    if n + 2 * crossing > wpos.shape[0]:  # cannot happen for convex pieces; never write past
-        return -1, -1
-    _copy(pos, nb, n, wpos, wnb)
+        return 0, n
+    if 4 * n > pos.shape[0]:  # n + 2 * crossing edges (at most 3 n / 2) might not fit
+        crossing = 0
+        for v in range(n):
+            for p in range(3):
+                crossing += side[v] == 0 and side[nb[v, p]] == 1
+        if n + 2 * crossing > pos.shape[0]:  # cannot happen for convex pieces
+            return -1, -1
     m = n
     for vcur in range(n):
         if side[vcur] == 1:
             continue
         for p in range(3):
-            vnext = wnb[vcur, p]
+            vnext = nb[vcur, p]
             if vnext >= n or side[vnext] == 0:
                 continue
-            wa = c - wpos[vnext, axis]  # > 0
-            wb = wpos[vcur, axis] - c  # >= 0
+            wa = c - pos[vnext, axis]  # > 0
+            wb = pos[vcur, axis] - c  # >= 0
             for d in range(3):
-                x = (wa * wpos[vcur, d] + wb * wpos[vnext, d]) / (wa + wb)
-                wpos[m, d] = x
-                wpos[m + 1, d] = x
-            wpos[m, axis] = c
-            wpos[m + 1, axis] = c
+                x = (wa * pos[vcur, d] + wb * pos[vnext, d]) / (wa + wb)
+                pos[m, d] = x
+                pos[m + 1, d] = x
+            pos[m, axis] = c
+            pos[m + 1, axis] = c
             # m: the copy above, joined to vcur; m + 1: the copy below, joined to vnext
-            wnb[m, 0] = vcur
-            wnb[vcur, p] = m
+            nb[m, 0] = vcur
+            nb[vcur, p] = m
             side[m] = 0
-            wnb[m + 1, 0] = vnext
+            nb[m + 1, 0] = vnext
             for q in range(3):
-                if wnb[vnext, q] == vcur:
-                    wnb[vnext, q] = m + 1
+                if nb[vnext, q] == vcur:
+                    nb[vnext, q] = m + 1
                     break
             side[m + 1] = 1
             m += 2
     # link the new vertices around the cap: walk the face from each to the next new one
     for vstart in range(n, m):
         vcur = vstart
-        vnext = wnb[vcur, 0]
+        vnext = nb[vcur, 0]
         while True:
             q = 0
-            while wnb[vnext, q] != vcur:
+            while nb[vnext, q] != vcur:
                 q += 1
             vcur = vnext
-            vnext = wnb[vcur, (q + 1) % 3]
+            vnext = nb[vcur, (q + 1) % 3]
             if vcur >= n:
                 break
-        wnb[vstart, 2] = vcur
-        wnb[vcur, 1] = vstart
+        nb[vstart, 2] = vcur
+        nb[vcur, 1] = vstart
     nbl = 0
     nab = 0
     for v in range(m):
@@ -132,16 +129,18 @@ def _split(pos, nb, n, axis, c, bpos, bnb, apos, anb, wpos, wnb, side, newid):
         else:
             newid[v] = nab
             nab += 1
+    # the part above compacts forwards in place: vertex v moves to newid[v] <= v, a slot
+    # already read
     for v in range(m):
         w = newid[v]
         if side[v] == 1:
             for d in range(3):
-                bpos[w, d] = wpos[v, d]
-                bnb[w, d] = newid[wnb[v, d]]
+                bpos[w, d] = pos[v, d]
+                bnb[w, d] = newid[nb[v, d]]
         else:
             for d in range(3):
-                apos[w, d] = wpos[v, d]
-                anb[w, d] = newid[wnb[v, d]]
+                pos[w, d] = pos[v, d]
+                nb[w, d] = newid[nb[v, d]]
     return nbl, nab
 
 
@@ -201,8 +200,8 @@ def _tet_cells(corners, nz, ny, nx, cells, vols, pos_buf, nb_buf, side, newid, m
     """Every (flat voxel index, overlap volume) of one tetrahedron, in index units.
 
     ``corners`` (4, 3) lie inside the box; ``cells`` and ``vols`` hold at least as many
-    entries as the tetrahedron's range of cells; ``pos_buf`` (8, _MAXV, 3) float64 and
-    ``nb_buf`` (8, _MAXV, 3) int64 hold the polyhedra. Returns the number written, -1 if
+    entries as the tetrahedron's range of cells; ``pos_buf`` (4, _MAXV, 3) float64 and
+    ``nb_buf`` (4, _MAXV, 3) int64 hold the polyhedra. Returns the number written, -1 if
     a piece outgrew the buffers.
     """
     # local origin: an integer corner, so that the planes stay exact and the volumes are
@@ -233,9 +232,11 @@ def _tet_cells(corners, nz, ny, nx, cells, vols, pos_buf, nb_buf, side, newid, m
         cells[0] = ((z0 + o[2]) * ny + y0 + o[1]) * nx + x0 + o[0]
         vols[0] = abs(det) / 6.0
         return 1
-    # the sweep, one level per axis (z, y, x): level L cuts its rest polyhedron (buffer
-    # 2 L or 2 L + 1, alternating) at its next plane; the piece below goes to level L + 1
-    # (buffer 6 after x); one call site of _split keeps the compiled code small
+    # the sweep, one level per axis (z, y, x): level L cuts its rest polyhedron in place at
+    # its next plane, the piece below going to buffer L + 1 (level L + 1's rest; after x,
+    # the cell's piece); the last piece along an axis stays where it lies, so level L's
+    # rest is in one of the buffers 0..L; one call site of _split keeps the compiled code
+    # small
     size = (nz - o[2], ny - o[1], nx - o[0])
     cur = np.zeros(3, np.int64)  # buffer of each level's rest
     nrest = np.zeros(3, np.int64)
@@ -252,18 +253,16 @@ def _tet_cells(corners, nz, ny, nx, cells, vols, pos_buf, nb_buf, side, newid, m
             continue
         axis = 2 - level
         r = cur[level]
-        dst = 2 * level + 2 if level < 2 else 6
         if idx[level] < end[level]:
-            other = 4 * level + 1 - r  # the level's other rest buffer
+            dst = level + 1  # never a rest buffer of this level: those are 0..level
             npiece, nrest[level] = _split(pos_buf[r], nb_buf[r], nrest[level], axis,
                                           idx[level] + 0.5, pos_buf[dst], nb_buf[dst],
-                                          pos_buf[other], nb_buf[other], pos_buf[7],
-                                          nb_buf[7], side, newid)
-            cur[level] = other
+                                          side, newid)
             if npiece < 0:
                 return -1
-        else:
-            npiece = _copy(pos_buf[r], nb_buf[r], nrest[level], pos_buf[dst], nb_buf[dst])
+        else:  # the last cell along the axis: the rest is the piece, where it lies
+            dst = r
+            npiece = nrest[level]
             nrest[level] = 0
         idx[level] += 1
         if npiece == 0:
@@ -274,7 +273,7 @@ def _tet_cells(corners, nz, ny, nx, cells, vols, pos_buf, nb_buf, side, newid, m
             nrest[level] = npiece
             idx[level], end[level] = _cell_range(pos_buf[dst], npiece, 2 - level, size[level])
             continue
-        vol = _volume(pos_buf[6], nb_buf[6], npiece, mark)
+        vol = _volume(pos_buf[dst], nb_buf[dst], npiece, mark)
         if vol > 0.0:
             cells[count] = ((idx[0] - 1 + o[2]) * ny + idx[1] - 1 + o[1]) * nx + idx[2] - 1 + o[0]
             vols[count] = vol
@@ -285,7 +284,7 @@ def _tet_cells(corners, nz, ny, nx, cells, vols, pos_buf, nb_buf, side, newid, m
 @njit(cache=True)
 def _work():
     """The work buffers of :func:`_tet_cells` (the cell lists grow as needed)."""
-    return (np.empty((8, _MAXV, 3)), np.empty((8, _MAXV, 3), np.int64), np.empty(_MAXV, np.int64),
+    return (np.empty((4, _MAXV, 3)), np.empty((4, _MAXV, 3), np.int64), np.empty(_MAXV, np.int64),
             np.empty(_MAXV, np.int64), np.empty((_MAXV, 3), np.bool_), np.empty(64, np.int64),
             np.empty(64))
 
@@ -335,7 +334,7 @@ def _overlaps(P, nz, ny, nx, img, values, tet_vol, tet_w, vox_vol, vox_w):
     return count
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _record(P, nz, ny, nx, t0, start, voxel, overlap):
     """Write the overlaps of tetrahedra ``t0, t0 + 1, ...`` into compressed rows: those of
     tetrahedron t at ``start[t]:start[t + 1]`` of ``voxel`` (flat voxel index) and

@@ -352,14 +352,15 @@ def test_bad_input_of_the_transpose_is_refused():
         voxel_overlaps(pts, [[0, 1, 2, 3]], (3, 3.0, 3))
 
 
-@pytest.mark.parametrize("chunk, slack, redone", [(7, 1.0, False), (40, 0.0, True),
-                                                  (10 ** 6, 0.0, True)])
+@pytest.mark.parametrize("chunk, slack, redone, threaded", [
+    (7, 1.0, False, True), (7, 1.0, False, False), (40, 0.0, True, True),
+    (40, 0.3, True, True), (10 ** 6, 0.0, True, True)])
 def test_overlap_rows_do_not_depend_on_the_chunks_or_their_buffers(monkeypatch, chunk, slack,
-                                                                   redone):
-    """The parallel recorder packs chunks of tetrahedra; a chunk that overflows its
-    stretch is done again alone. The rows stay those of one
-    sequential pass of the kernel, and sum to the streaming kernel's grays."""
-    from ctseg import _overlap_rows
+                                                                   redone, threaded):
+    """The recorder packs chunks of tetrahedra, on threads or not; a chunk that overflows
+    its stretch is done again alone (slack 0.3: some chunks do, some not). The rows stay
+    those of one sequential pass of the kernel, and sum to the streaming kernel's grays."""
+    from ctseg import _overlap_rows, _threads
     from ctseg._tet_clip import _record
     from ctseg.tetra_gray import VoxelOverlaps
 
@@ -373,6 +374,7 @@ def test_overlap_rows_do_not_depend_on_the_chunks_or_their_buffers(monkeypatch, 
     assert _record(P, *shape, 0, start, voxel, overlap) == len(P)
     expected = np.full(len(P), slack * 30.0)
     monkeypatch.setattr(_overlap_rows, "_CHUNK_TETS", chunk)
+    monkeypatch.setattr(_threads, "enabled", threaded)
     calls = []
     growing = _overlap_rows._record_growing
     monkeypatch.setattr(_overlap_rows, "_record_growing", lambda *a: calls.append(1) or growing(*a))
