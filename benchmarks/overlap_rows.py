@@ -13,13 +13,13 @@ variant must give the serial pass's rows bit for bit; the times are medians of r
 interleaved, with numba's thread count set per row.
 """
 import argparse
-import json
 import os
 import platform
 import time
 
 import numba
 import numpy as np
+from accuracy import write_results  # benchmarks/ is this script's folder
 from numba import njit, prange
 
 from ctseg import _threads, stages3d
@@ -121,10 +121,7 @@ def main():
     md = "\n".join(lines)
     print(md)
     if args.out:
-        with open(args.out, "w") as fh:
-            fh.write(md + "\n")
-        with open(os.path.splitext(args.out)[0] + ".json", "w") as fh:
-            json.dump({"size": args.size, "tetrahedra": len(P), "rows": rows}, fh, indent=1)
+        write_results(args.out, md, {"size": args.size, "tetrahedra": len(P), "rows": rows})
 
 
 if __name__ == "__main__":
