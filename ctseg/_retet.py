@@ -89,6 +89,30 @@ def _face_keys(tets):
     return np.sort(tets[:, _FACES].reshape(-1, 3), axis=1)
 
 
+_KEY_BITS = 21
+
+
+def packed_keys(triples):
+    """Sorted vertex triples (f, 3) as one int64 each, in their lexicographic order; None
+    when a vertex index needs more than 21 bits. One integer sorts several times faster
+    than three columns, in the same order."""
+    t = np.asarray(triples, np.int64)
+    if len(t) and int(t.max()) >> _KEY_BITS:
+        return None
+    return (t[:, 0] << 2 * _KEY_BITS) | (t[:, 1] << _KEY_BITS) | t[:, 2]
+
+
+def unique_rows(triples):
+    """``np.unique(triples, axis=0, return_inverse=True)`` (as a flat inverse), by the
+    packed keys where they fit."""
+    key = packed_keys(triples)
+    if key is None:
+        rows, inverse = np.unique(triples, axis=0, return_inverse=True)
+        return rows, inverse.ravel()
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    return triples[first], inverse.ravel()
+
+
 def local_delaunay(old, new, tets, moved, box, options, flat_rel, spheres=None):
     """The Delaunay tetrahedra of sites ``new`` from those (``tets``) of ``old``, where
     only the sites ``moved`` differ.
@@ -143,8 +167,7 @@ def local_delaunay(old, new, tets, moved, box, options, flat_rel, spheres=None):
     # the cavity's boundary: its faces found once among its tetrahedra
     ck = _face_keys(cav)
     lk = _face_keys(lt)
-    faces, ids = np.unique(np.vstack([ck, lk]), axis=0, return_inverse=True)
-    ids = ids.ravel()
+    faces, ids = unique_rows(np.vstack([ck, lk]))
     cid, lid = ids[:len(ck)], ids[len(ck):]
     n_ids = int(ids.max()) + 1
     bound = np.bincount(cid, minlength=n_ids) == 1

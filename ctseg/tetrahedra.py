@@ -4,7 +4,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._retet import circumspheres, delaunay_simplices, flat_off_face, local_delaunay
+from ._retet import (circumspheres, delaunay_simplices, flat_off_face, local_delaunay,
+                     packed_keys)
 from .errors import MeshCheckError
 
 # |volume| below this share of the mean tetrahedron volume counts as flat (zero volume
@@ -92,9 +93,15 @@ def face_graph(tetrahedra):
     """
     faces = tetra_faces(tetrahedra)
     key = np.sort(faces, axis=1)
-    order = np.lexsort(key.T[::-1])
-    sk = key[order]
-    new = np.r_[True, np.any(sk[1:] != sk[:-1], axis=1)]
+    packed = packed_keys(key)
+    if packed is None:
+        order = np.lexsort(key.T[::-1])
+        sk = key[order]
+        new = np.r_[True, np.any(sk[1:] != sk[:-1], axis=1)]
+    else:  # the same stable order from one integer per face
+        order = np.argsort(packed, kind="stable")
+        sk = packed[order]
+        new = np.r_[True, sk[1:] != sk[:-1]]
     group = np.cumsum(new) - 1
     counts = np.bincount(group)
     if counts.max(initial=0) > 2:
@@ -154,6 +161,11 @@ def delaunay_tetrahedra(sites, box):
     >>> float(tetra_volumes(mesh.points, mesh.tetrahedra).sum())
     2.0
     """
+    return _with_faces(*_delaunay(sites, box))
+
+
+def _delaunay(sites, box):
+    """:func:`delaunay_tetrahedra`'s (points, tetrahedra), checked, without the face graph."""
     pts = np.asarray(sites, float)
     box = np.asarray(box, float)
     size = 1e-6 * float(np.linalg.norm(box))
@@ -170,12 +182,12 @@ def delaunay_tetrahedra(sites, box):
             raise MeshCheckError(f"tetrahedra: {int(inside.sum())} flat tetrahedra inside the "
                                  "box (coplanar sites) after moving the sites")
         pts = _jitter(np.asarray(sites, float), box, size * 10 ** attempt, attempt)
-    return _checked_mesh(pts, tets[~flat], vol[~flat], box)
+    _check_cover(pts, tets[~flat], vol[~flat], box)
+    return pts, tets[~flat]
 
 
-def _checked_mesh(pts, tets, vol, box):
-    """The TetraMesh of tetrahedra of volumes ``vol`` that must fill the box exactly and
-    use every site."""
+def _check_cover(pts, tets, vol, box):
+    """Tetrahedra of volumes ``vol`` must fill the box exactly and use every site."""
     total = float(np.prod(box))
     if vol.min(initial=0.0) < 0:
         raise MeshCheckError(f"tetrahedra: {int(np.sum(vol < 0))} negatively oriented")
@@ -186,7 +198,6 @@ def _checked_mesh(pts, tets, vol, box):
     if len(used) != len(pts):
         raise MeshCheckError(f"tetrahedra: {len(pts) - len(used)} site(s) are no vertex "
                              "(coincident sites)")
-    return _with_faces(pts, tets)
 
 
 def _with_faces(pts, tets):
@@ -261,8 +272,9 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
         Tetrahedra left below the angle.
     """
     box = np.asarray(box, float)
-    first = delaunay_tetrahedra(np.asarray(sites, float), box)
-    best_pts, best_tets, best_mesh = first.points, first.tetrahedra, first
+    # the face graph only of the tetrahedra kept; whole triangulations come checked
+    best_pts, best_tets = _delaunay(np.asarray(sites, float), box)
+    checked = True
     angle = dihedral_angles(best_pts, best_tets).min(axis=1)
     best_key = (int(np.sum(angle < min_dihedral_deg)), -float(angle.min()))
     spheres = circumspheres(best_pts, best_tets)
@@ -279,8 +291,9 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
         pts[bad] = np.clip(pts[bad] + step, 0.0, box)
         keep, added = local_delaunay(best_pts, pts, best_tets, bad, box, QHULL_OPTIONS,
                                      FLAT_REL, spheres)
-        mesh, sph = None, None
-        if added is not None:
+        sph = None
+        whole = added is None
+        if not whole:
             tets = np.vstack([best_tets[keep], added])
             a = np.concatenate([angle[keep], dihedral_angles(pts, added).min(axis=1)])
             # the kept tetrahedra's vertices did not move: their spheres stay
@@ -288,22 +301,22 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
                         for kept, fresh in zip(spheres, circumspheres(pts, added)))
         else:
             try:
-                mesh = delaunay_tetrahedra(pts, box)
+                pts, tets = _delaunay(pts, box)
             except MeshCheckError:
                 continue
-            pts, tets = mesh.points, mesh.tetrahedra
             a = dihedral_angles(pts, tets).min(axis=1)
         key = (int(np.sum(a < min_dihedral_deg)), -float(a.min()))
         if key < best_key:
-            best_pts, best_tets, best_mesh, angle, best_key = pts, tets, mesh, a, key
+            best_pts, best_tets, checked, angle, best_key = pts, tets, whole, a, key
             spheres = circumspheres(pts, tets) if sph is None else sph
-    if best_mesh is None:
+    if not checked:
         try:
-            best_mesh = _checked_mesh(best_pts, best_tets, tetra_volumes(best_pts, best_tets), box)
+            _check_cover(best_pts, best_tets, tetra_volumes(best_pts, best_tets), box)
         except MeshCheckError:  # a patch's round-off: the best sites triangulated whole
-            best_mesh = delaunay_tetrahedra(best_pts, box)
-            angle = dihedral_angles(best_mesh.points, best_mesh.tetrahedra).min(axis=1)
+            best_pts, best_tets = _delaunay(best_pts, box)
+            angle = dihedral_angles(best_pts, best_tets).min(axis=1)
             best_key = (int(np.sum(angle < min_dihedral_deg)),)
+    best_mesh = _with_faces(best_pts, best_tets)
     return best_mesh.points, best_mesh, best_key[0]
 
 

@@ -126,10 +126,16 @@ def test_local_update_gives_the_delaunay_tetrahedra_of_the_moved_sites(n_moved, 
     assert _tet_set(tets) == _tet_set(delaunay_tetrahedra(new, box).tetrahedra)
 
 
-def test_sliver_perturbation_gives_the_mesh_of_whole_triangulations():
-    """Local updates every round: the same sites and tetrahedra as a whole triangulation
-    every round (the rule before the local update), positively oriented."""
+@pytest.mark.parametrize("local", [True, False])
+def test_sliver_perturbation_gives_the_mesh_of_whole_triangulations(monkeypatch, local):
+    """Local updates every round (or, where every local patch fails, whole triangulations):
+    the same sites and tetrahedra as a whole triangulation every round (the rule before the
+    local update), positively oriented, with the face graph of those tetrahedra."""
+    from ctseg import tetrahedra
     from ctseg.tetrahedra import SLIVER_STEP, dihedral_angles, perturb_slivers
+
+    if not local:
+        monkeypatch.setattr(tetrahedra, "local_delaunay", lambda *a, **k: (None, None))
 
     sites = _grid_sites(6, 0.08, seed=5)
     box = np.array([6.0, 6.0, 6.0])
@@ -165,6 +171,29 @@ def test_sliver_perturbation_gives_the_mesh_of_whole_triangulations():
     assert len(mesh.tetrahedra) == len(best.tetrahedra)
     assert tetra_volumes(mesh.points, mesh.tetrahedra).min() > 0
     assert left == key[0]
+    for got, want in zip((mesh.adjacency, mesh.shared_faces, mesh.boundary_faces),
+                         face_graph(mesh.tetrahedra)):
+        np.testing.assert_array_equal(got, want)
+
+
+def test_packed_face_keys_sort_as_the_rows_do():
+    """Faces as one integer each: the lexicographic order of the rows, the same unique rows
+    and inverse as numpy's row-wise unique; past 21 bits a vertex index falls back to it."""
+    from ctseg._retet import packed_keys, unique_rows
+
+    rng = np.random.default_rng(4)
+    for high in (50, 2 ** 21 - 1, 2 ** 30):
+        rows = np.sort(rng.integers(0, high, (3000, 3)), axis=1)
+        rows = np.vstack([rows, rows[:500]])  # duplicates
+        key = packed_keys(rows)
+        assert (key is None) == (high > 2 ** 21)
+        if key is not None:
+            np.testing.assert_array_equal(np.argsort(key, kind="stable"),
+                                          np.lexsort(rows.T[::-1]))
+        got, inverse = unique_rows(rows)
+        want, want_inverse = np.unique(rows, axis=0, return_inverse=True)
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(inverse, want_inverse.ravel())
 
 
 def _random_box_sites(seed=2):
