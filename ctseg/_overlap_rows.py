@@ -1,6 +1,7 @@
 """The compressed rows of a mesh's exact (tetrahedron, voxel) overlaps, recorded in
-parallel: the tetrahedra in fixed chunks, each chunk into buffers of its own sized by the
-expected cell count, then packed.
+parallel: the tetrahedra in fixed chunks, each chunk into its own stretch of one buffer
+sized by the expected cell count (into buffers of its own, grown, where it overflows),
+then packed in place.
 
 A tetrahedron's row is what :func:`ctseg._tet_clip._record` makes of it alone, so the
 rows, and every sum over them, are the same whatever the chunking and the thread count.
