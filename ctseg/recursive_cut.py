@@ -100,11 +100,13 @@ def _recursive_split(f, area, adjacency, centroids, interior, edges, means, min_
     nearest, in_core = nearest_level_core(f, means)
     leaf = np.zeros(m, np.int64)
     leaf_material = []
-    stack = [(np.arange(m), 0)]
+    # a component with the adjacency rows inside it (in their order): a split reads only
+    # its own edges
+    stack = [(np.arange(m), np.arange(len(adjacency)), 0)]
     calls = deepest = 0
     in_comp = np.full(m, -1, np.int64)
     while stack:
-        comp, depth = stack.pop()
+        comp, rows, depth = stack.pop()
         deepest = max(deepest, depth)
         core = comp[in_core[comp]]
         mass = np.bincount(nearest[core], area[core], k_modes)
@@ -126,23 +128,26 @@ def _recursive_split(f, area, adjacency, centroids, interior, edges, means, min_
         c1 = core[nearest[core] == hi_mode]
         s0 = c0[np.argmin(np.abs(f[c0] - means[lo_mode]))]
         s1 = c1[np.argmin(np.abs(f[c1] - means[hi_mode]))]
-        in_comp[:] = -1
         in_comp[comp] = np.arange(len(comp))
-        a, b = in_comp[adjacency[:, 0]], in_comp[adjacency[:, 1]]
-        keep = (a >= 0) & (b >= 0)
-        el = None if edge_length is None else edge_length[keep]
-        labels, _ = graphcut_split(f[comp], np.column_stack([a[keep], b[keep]]), centroids[comp],
+        local = in_comp[adjacency[rows]]
+        el = None if edge_length is None else edge_length[rows]
+        labels, _ = graphcut_split(f[comp], local, centroids[comp],
                                    seeds=(in_comp[s0], in_comp[s1]), edge_length=el, **cut_params)
         calls += 1
         # each side goes on as its connected pieces: a piece cut off far from the rest of
-        # its side (a partial-volume triangle whose gray matches that side) is judged alone
-        local = np.column_stack([a[keep], b[keep]])
+        # its side (a partial-volume triangle whose gray matches that side) is judged alone;
+        # a piece's edges are the same-side edges between its elements
         same = labels[local[:, 0]] == labels[local[:, 1]]
         n_pieces, piece = connected_pieces(local[same], len(comp))
         order = np.argsort(piece, kind="stable")
         bounds = np.searchsorted(piece[order], np.arange(n_pieces + 1))
+        edge_piece = piece[local[same, 0]]
+        edge_order = np.argsort(edge_piece, kind="stable")
+        edge_bounds = np.searchsorted(edge_piece[edge_order], np.arange(n_pieces + 1))
+        inner = rows[same][edge_order]
         for q in range(n_pieces - 1, -1, -1):
-            stack.append((comp[order[bounds[q]:bounds[q + 1]]], depth + 1))
+            stack.append((comp[order[bounds[q]:bounds[q + 1]]],
+                          inner[edge_bounds[q]:edge_bounds[q + 1]], depth + 1))
     leaf_material = np.array(leaf_material, np.int64)
     label_fragmented_layers(area, leaf, leaf_material, adjacency, nearest, in_core,
                              min_layer_area, k_modes)
