@@ -22,7 +22,7 @@ import numpy as np
 from accuracy import write_results  # benchmarks/ is this script's folder
 from numba import njit, prange
 
-from ctseg import _threads, stages3d
+from ctseg import stages3d
 from ctseg._overlap_rows import overlap_rows
 from ctseg._tet_clip import _record
 from ctseg.phantoms3d import make_part_3d
@@ -102,7 +102,6 @@ def main():
     for _ in range(args.repeats):
         for row, (name, n, fn) in zip(rows, variants):
             numba.set_num_threads(n)
-            _threads.enabled = True
             t = time.perf_counter()
             fn(P, image.shape, expected)
             row["times_s"].append(time.perf_counter() - t)

@@ -150,18 +150,13 @@ def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_
         model = ndimage.gaussian_filter(lev, s, mode="nearest") if s > 0 else lev
         return float(np.mean((target - model[band]) ** 2))
 
-    def misfits(widths):  # the new ones side by side: ndimage releases the GIL
+    def misfits(widths):  # the new ones side by side (ndimage releases the GIL)
         new = [float(s) for s in dict.fromkeys(widths) if float(s) not in seen]
         seen.update(zip(new, thread_map(fit, new)))
-
-    def misfit(s):
-        if s not in seen:
-            misfits([s])
-        return seen[s]
+        return [seen[float(s)] for s in widths]
 
     def parabola(xs):  # vertex of the parabola through three equally spaced points
-        misfits(xs)
-        c0, c1, c2 = (misfit(x) for x in xs)
+        c0, c1, c2 = misfits(xs)
         h = xs[1] - xs[0]
         curv = c0 - 2.0 * c1 + c2
         if curv <= 0:
@@ -171,8 +166,7 @@ def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_
     # a 0.5 px grid, then two parabola steps around its best point (the misfit is smooth,
     # with one minimum near the true blur): 10 blurs instead of a fine grid's 16
     grid = np.arange(0.0, max_px + 1e-9, 0.5)
-    misfits(grid)
-    k = int(np.argmin([misfit(x) for x in grid]))
+    k = int(np.argmin(misfits(grid)))
     k = min(max(k, 1), len(grid) - 2)
     v = parabola(grid[k - 1:k + 2])
     v = max(v, 0.1)

@@ -138,10 +138,11 @@ def _recursive_split(f, area, adjacency, centroids, interior, edges, means, min_
         # its side (a partial-volume triangle whose gray matches that side) is judged alone;
         # a piece's edges are the same-side edges between its elements
         same = labels[local[:, 0]] == labels[local[:, 1]]
-        n_pieces, piece = connected_pieces(local[same], len(comp))
+        same_edges = local[same]
+        n_pieces, piece = connected_pieces(same_edges, len(comp))
         order = np.argsort(piece, kind="stable")
         bounds = np.searchsorted(piece[order], np.arange(n_pieces + 1))
-        edge_piece = piece[local[same, 0]]
+        edge_piece = piece[same_edges[:, 0]]
         edge_order = np.argsort(edge_piece, kind="stable")
         edge_bounds = np.searchsorted(edge_piece[edge_order], np.arange(n_pieces + 1))
         inner = rows[same][edge_order]
