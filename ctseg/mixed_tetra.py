@@ -37,8 +37,41 @@ def voxel_noise(volume):
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
 
 
+def tetra_spread(volume_255, overlaps, mean_255=None):
+    """Standard deviation of each tetrahedron's voxels (overlap-weighted) and the volume's
+    voxel noise (:func:`voxel_noise`).
+
+    Parameters
+    ----------
+    volume_255 : (nz, ny, nx) array_like
+    overlaps : ctseg.tetra_gray.VoxelOverlaps
+        The mesh's voxel overlaps on the volume's shape.
+    mean_255 : (m,) array_like, optional
+        Each tetrahedron's mean of ``volume_255``, if known already.
+
+    Returns
+    -------
+    spread : (m,) ndarray
+    noise : float
+
+    Example
+    -------
+    >>> from ctseg.tetrahedra import delaunay_tetrahedra
+    >>> cube = delaunay_tetrahedra(np.array([[x, y, z] for x in (0, 3) for y in (0, 3)
+    ...                                      for z in (0, 3)], float), (3, 3, 3))
+    >>> vol = np.zeros((4, 4, 4)); vol[:, :, 2:] = 100.0
+    >>> spread, noise = tetra_spread(vol, VoxelOverlaps(cube.points, cube.tetrahedra, vol.shape))
+    >>> np.round(spread, 1).tolist(), noise  # each holds voxels of 0 and 100; no noise
+    ([33.1, 33.1, 50.0, 50.0, 33.1, 33.1], 0.0)
+    """
+    vol = np.asarray(volume_255, float)
+    mean = overlaps.tetra_mean(vol) if mean_255 is None else np.asarray(mean_255, float)
+    spread = np.sqrt(np.maximum(overlaps.tetra_mean(vol * vol) - mean ** 2, 0.0))
+    return spread, voxel_noise(vol)
+
+
 def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(1.0, 1.0, 1.0),
-                  mean_255=None, adjacency=None, overlaps=None):
+                  mean_255=None, adjacency=None, overlaps=None, spread=None):
     """Relabel the mixed tetrahedra by their voxels' votes (see the module's docstring).
 
     Parameters
@@ -61,6 +94,8 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
         known already.
     overlaps : ctseg.tetra_gray.VoxelOverlaps, optional
         The mesh's voxel overlaps, if computed already.
+    spread : (spread_255, noise_255), optional
+        :func:`tetra_spread` of the volume, if computed already.
 
     Returns
     -------
@@ -84,11 +119,9 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
     level = np.asarray(level_255, float)
     if len(level) < 2 or len(material) == 0:
         return material, 0
-    noise = voxel_noise(vol)
     if overlaps is None:
         overlaps = VoxelOverlaps(points, tetrahedra, vol.shape, spacing)
-    mean = overlaps.tetra_mean(vol) if mean_255 is None else np.asarray(mean_255, float)
-    spread = np.sqrt(np.maximum(overlaps.tetra_mean(vol * vol) - mean ** 2, 0.0))
+    spread, noise = tetra_spread(vol, overlaps, mean_255) if spread is None else spread
     asked = np.flatnonzero(spread > MIXED_NOISE_SPREAD * noise)
     if not len(asked):
         return material, 0

@@ -130,8 +130,10 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     The material levels are the volume's (:func:`ctseg.levels.volume_levels`); with
     ``streak_correction`` every z slice is first corrected against them, as in slices
     mode. Where the flat voxels hold partial volume (their spread more than twice the
-    tetrahedra's), the labelling takes the levels of the tetrahedron grays instead
-    (:func:`ctseg.levels3d.checked_levels`; ``diagnostics["levels"]`` says which).
+    tetrahedra's), the labelling takes the levels of the tetrahedron grays instead, and a
+    level that the homogeneous tetrahedra (voxels spreading as the noise) show between two
+    levels, and none explains, is added (:func:`ctseg.levels3d.checked_levels`;
+    ``diagnostics["levels"]`` says which).
     Tetrahedra straddling a boundary whose voxels mostly vote for other materials are
     relabelled (:func:`ctseg.mixed_tetra.relabel_mixed`; ``diagnostics["relabelled_mixed"]``),
     and between two materials of high contrast a boundary tetrahedron whose gray lies beyond

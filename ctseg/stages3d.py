@@ -21,7 +21,7 @@ from .errors import InputError, MeshCheckError, ParameterError
 from .labelling import CUT_KEYS
 from .levels import volume_levels
 from .levels3d import checked_levels
-from .mixed_tetra import relabel_beyond_iso50, relabel_mixed
+from .mixed_tetra import relabel_beyond_iso50, relabel_mixed, tetra_spread
 from .params import AUTO, DEFAULTS, resolve
 from .partial_volume import claim_missing_levels, relabel_partial_volume_pieces
 from .pipeline import DENSITY_KEYS
@@ -347,7 +347,9 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
         area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
         cut["edge_length"] = area / float(np.prod(sp)) ** (2.0 / 3.0)
     f255 = np.clip((gray - offset) * factor, 0.0, 255.0)
-    levels, levels_report = checked_levels(levels, pixel_sigma, f255, volume_vox, p)
+    vol255, mean255 = (image - offset) * factor, (gray - offset) * factor
+    spread = tetra_spread(vol255, overlaps, mean255)  # for the levels and the mixed rule
+    levels, levels_report = checked_levels(levels, pixel_sigma, f255, volume_vox, p, *spread)
     # interior: most of the element's voxels are flat (the un-sharpened density below
     # half its range, as the flat pixels that measure the levels)
     strength = density_volume(image, sp, density_sigma_px=p.flat_sigma_px,
@@ -365,17 +367,16 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
         def sharpen():
             level = region_levels(seg.material, f255, volume_vox, mesh.adjacency)
             return blur_corrected_gray_3d(f255, mesh.points, mesh.tetrahedra, level,
-                                          (image - offset) * factor, sp,
+                                          vol255, sp,
                                           blur_min_self_weight=p.blur_min_self_weight,
                                           blur_max_px=p.blur_max_px, overlaps=overlaps)
         f_sharp, blur_px = run("blur_correction", 0.85, sharpen)
         seg = run("graphcut_2", 0.88, segment_triangles, np.clip(f_sharp, 0.0, 255.0),
                   volume_vox, mesh.adjacency, cent, levels=levels, **cut)
     material = np.searchsorted(levels, seg.mode_gray)[seg.material]
-    material, mixed = run("mixed_relabel", 0.89, relabel_mixed, (image - offset) * factor,
-                          mesh.points, mesh.tetrahedra, material, levels, sp,
-                          mean_255=(gray - offset) * factor, adjacency=mesh.adjacency,
-                          overlaps=overlaps)
+    material, mixed = run("mixed_relabel", 0.89, relabel_mixed, vol255, mesh.points,
+                          mesh.tetrahedra, material, levels, sp, mean_255=mean255,
+                          adjacency=mesh.adjacency, overlaps=overlaps, spread=spread)
     # the voxel noise from the flat voxels' 3 x 3 means (pixel_sigma): differences of
     # neighbouring voxels would count the edges too, which on a porous volume are many
     material, beyond = run("iso50_relabel", 0.895, relabel_beyond_iso50, f255, material,

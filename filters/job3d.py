@@ -72,6 +72,18 @@ def segment_and_write_3d(image, geometry, params, output, surfaces=None, figure=
     return diag, written
 
 
+def _levels_line(report, levels_255):
+    """How the material levels were found (:func:`ctseg.levels3d.checked_levels`)."""
+    source = {"given": "given", "flat_voxels": "the flat voxels", "tetrahedra":
+              "the tetrahedra (the flat voxels hold partial volume)", "homogeneous_tetrahedra":
+              "the count asked for, with the homogeneous tetrahedra's"}.get(report.get("method"),
+                                                                          "the flat voxels")
+    added = report.get("homogeneous_added_255") or []
+    return (f"levels (0-255): {', '.join(f'{v:.1f}' for v in levels_255)} from {source}"
+            + (f"; {', '.join(f'{v:.1f}' for v in added)} shown only by the homogeneous "
+               "tetrahedra" if added else ""))
+
+
 def summary_lines_3d(name, diag, outputs):
     """The lines that sum up a 3D job: tetrahedra, materials, surfaces, quality, the files
     written and, with truth, Dice per material."""
@@ -81,6 +93,7 @@ def summary_lines_3d(name, diag, outputs):
         f"{name}: {shape} -> {diag['n_tetrahedra']} tetrahedra, {diag['n_materials']} "
         f"materials (gray {', '.join(f'{g:.4g}' for g in diag['material_gray'])}), "
         f"{diag['n_interface_triangles']} interface triangles",
+        _levels_line(diag.get("levels", {}), diag.get("material_levels_255", [])),
         "surfaces: " + "; ".join(f"material {s['material']} {s['triangles']} triangles, volume "
                                  f"{s['enclosed_volume']:.6g}" for s in diag["surfaces"]),
         f"quality: min dihedral {q['min_dihedral_deg']:.1f} deg, min radius ratio "

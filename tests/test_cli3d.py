@@ -49,7 +49,7 @@ def test_3d_command_writes_everything(volume_files, tmp_path, capsys):
                "--sites", "300"])
     assert rc == 0
     out = capsys.readouterr().out
-    for word in ("tetrahedra", "materials", "interface triangles", "surfaces: material 0",
+    for word in ("tetrahedra", "materials", "interface triangles", "levels (0-255):", "surfaces: material 0",
                  "quality: min dihedral", "mesh checks: passed", "Dice per material"):
         assert word in out, (word, out)
     report = json.loads((tmp_path / "r.json").read_text())
@@ -255,3 +255,13 @@ def test_unwritable_folder(tmp_path, capsys):
         assert os.listdir(ro) == []
     finally:
         ro.chmod(0o755)
+
+
+def test_levels_line_says_where_the_levels_came_from():
+    from ctseg.filters.job3d import _levels_line
+
+    line = _levels_line({"method": "flat_voxels", "homogeneous_added_255": [41.6]},
+                        [16.6, 41.6, 71.9, 254.0])
+    assert line.startswith("levels (0-255): 16.6, 41.6, 71.9, 254.0 from the flat voxels")
+    assert "41.6 shown only by the homogeneous tetrahedra" in line
+    assert "homogeneous" not in _levels_line({"method": "tetrahedra"}, [20.0, 80.0])

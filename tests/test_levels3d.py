@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import ctseg.levels3d
-from ctseg.levels3d import checked_levels, tetra_levels
+from ctseg.levels3d import checked_levels, homogeneous_levels, hidden_levels, tetra_levels
 from ctseg.metrics import evaluate_tetra
 from ctseg.params import SegmentParams
 from ctseg.phantoms import make_volume
@@ -48,7 +48,9 @@ def test_small_phantom_gets_its_four_materials(monkeypatch):
     # measured 0.989 / 0.579 / 0.869 / 0.935
     assert np.all(np.array(acc["dice"]) >= [0.97, 0.45, 0.80, 0.88]), acc["dice"]
     # without the check the flat voxels' levels merge polymer and aluminium into the air
+    # (the homogeneous tetrahedra's levels, on their own, would add them back)
     monkeypatch.setattr(ctseg.levels3d, "FLAT_TO_ELEMENT_SPREAD", np.inf)
+    monkeypatch.setattr(ctseg.levels3d, "HOMOGENEOUS_SPREAD", 0.0)
     before = segment_volume_3d(ph.image)
     assert before.n_materials < 4 and before.diagnostics["levels"]["method"] == "flat_voxels"
 
@@ -58,3 +60,80 @@ def test_simulated_ct_volume_keeps_the_flat_levels():
     seg = segment_volume_3d(ph.image)
     assert seg.diagnostics["levels"]["method"] == "flat_voxels"
     assert seg.diagnostics["material_levels_255"] == seg.diagnostics["levels"]["flat_levels_255"]
+
+
+def _coated(rng):
+    """Tetrahedron grays and spreads of air, a blurred air/aluminium edge (all grays in
+    between, spreading as the contrast), a thin polymer between them, aluminium."""
+    gray = np.concatenate([rng.normal(20, 1, 3000), rng.uniform(20, 80, 3000),
+                           rng.normal(45, 1, 60), rng.normal(80, 1, 1500)])
+    spread = np.concatenate([rng.uniform(4, 7, 3000), rng.uniform(8, 25, 3000),
+                             rng.uniform(4, 7, 1560)])
+    return gray, np.ones(len(gray)), spread
+
+
+def test_homogeneous_tetrahedra_add_a_level_the_histograms_hide():
+    rng = np.random.default_rng(4)
+    gray, vol, spread = _coated(rng)
+    flat = np.array([20.0, 80.0])
+    # all tetrahedra together: the polymer drowns in the edge's continuum
+    assert len(tetra_levels(gray, vol)[0]) < 3
+    assert np.array_equal(checked_levels(flat, 2.5, gray, vol)[0], flat)
+    levels, rep = checked_levels(flat, 2.5, gray, vol, None, spread, 5.0)
+    assert np.allclose(levels, (20, 45, 80), atol=1.5) and len(rep["homogeneous_added_255"]) == 1
+    # the edge's tetrahedra spreading as the noise: no longer told apart, nothing added
+    levels, rep = checked_levels(flat, 2.5, gray, vol, None, np.full(len(gray), 5.0), 5.0)
+    assert np.array_equal(levels, flat) and rep["homogeneous_added_255"] == []
+
+
+def test_homogeneous_modes_next_to_a_level_add_nothing():
+    rng = np.random.default_rng(5)
+    gray = _modes(rng, (20, 26, 80), 1.0, (3000, 400, 1500))  # 26: within 20's separation
+    found, sigma = homogeneous_levels(gray, np.ones(len(gray)), np.full(len(gray), 4.0), 5.0)
+    assert len(hidden_levels(found, sigma, [20.0, 80.0])) == 0
+    # a homogeneous mode far from both is added; one near 80 is not, nor one beyond 20
+    gray = _modes(rng, (5, 20, 50, 84, 80), 1.0, (300, 3000, 400, 200, 1500))
+    found, sigma = homogeneous_levels(gray, np.ones(len(gray)), np.full(len(gray), 4.0), 5.0)
+    assert np.allclose(hidden_levels(found, sigma, [20.0, 80.0]), [50.0], atol=1.0)
+
+
+def test_a_thin_polymer_layer_gets_its_level(monkeypatch):
+    """96^3 seed 0: a polymer layer and bushing 3.5 voxels thick, 3 noise sd above air,
+    leave no mode among the flat voxels or the tetrahedra; the homogeneous ones show it."""
+    ph = make_part_3d(96, seed=0)
+    seg = segment_volume_3d(ph.image)
+    acc = evaluate_tetra(seg, ph.truth)
+    rep = seg.diagnostics["levels"]
+    assert seg.n_materials == 4 and len(rep["homogeneous_added_255"]) == 1
+    # measured 0.993 / 0.764 / 0.970 / 0.965
+    assert np.all(np.array(acc["dice"]) >= [0.97, 0.6, 0.93, 0.93]), acc["dice"]
+    monkeypatch.setattr(ctseg.levels3d, "HOMOGENEOUS_SPREAD", 0.0)  # no tetrahedron counts
+    before = segment_volume_3d(ph.image)
+    assert before.n_materials == 3 and before.diagnostics["levels"]["homogeneous_added_255"] == []
+
+
+def test_given_material_count_gives_way_to_a_hidden_level():
+    rng = np.random.default_rng(6)
+    gray, vol, spread = _coated(rng)
+    three = SegmentParams().replace(n_materials=3)
+    # the count's third level forced out of a bump at 200, which no tetrahedron is near
+    levels, rep = checked_levels(np.array([20.0, 80.0, 200.0]), 2.5, gray, vol, three, spread, 5.0)
+    assert rep["method"] == "homogeneous_tetrahedra" and np.allclose(levels, (20, 45, 80), atol=1.5)
+    # the polymer already among the levels: nothing hidden, kept as they are
+    flat = np.array([21.0, 44.0, 79.0])
+    levels, rep = checked_levels(flat, 2.5, gray, vol, three, spread, 5.0)
+    assert rep["method"] == "flat_voxels" and np.array_equal(levels, flat)
+    # without the spreads: the count's levels
+    levels, rep = checked_levels(np.array([20.0, 80.0, 200.0]), 2.5, gray, vol, three)
+    assert rep["method"] == "flat_voxels" and np.allclose(levels, (20, 80, 200))
+
+
+def test_a_handful_of_homogeneous_tetrahedra_is_no_level():
+    rng = np.random.default_rng(7)
+    gray, vol, spread = _coated(rng)
+    keep = np.ones(len(gray), bool)
+    keep[6000 + 10:6060] = False  # 10 polymer tetrahedra left: 0.13% of the volume
+    found, _ = homogeneous_levels(gray[keep], vol[keep], spread[keep], 5.0)
+    assert len(found) == 2
+    found, _ = homogeneous_levels(gray, vol, spread, 5.0)  # 60 of them: 0.8%
+    assert len(found) == 3
