@@ -308,8 +308,9 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
         ``image`` (:func:`ctseg.levels.volume_levels`). They are checked against the
         tetrahedra's grays first (:func:`ctseg.levels3d.checked_levels`).
     timed : callable, optional
-        A stage runner (:func:`ctseg.pipeline.stage_runner`) recording 'graphcut',
-        'blur_correction', 'graphcut_2', 'mixed_relabel' and 'manifold_repair'.
+        A stage runner (:func:`ctseg.pipeline.stage_runner`) recording 'level_check',
+        'graphcut', 'blur_correction', 'graphcut_2', 'mixed_relabel', 'iso50_relabel',
+        'piece_relabel' and 'manifold_repair'.
     overlaps : ctseg.tetra_gray.VoxelOverlaps, optional
         The mesh's voxel overlaps on ``image``'s shape, if kept from the gray: every mean
         over the mesh then reads them instead of clipping the tetrahedra again (default:
@@ -346,14 +347,16 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
         a, b, c = (mesh.points[mesh.shared_faces[:, i]] for i in range(3))
         area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
         cut["edge_length"] = area / float(np.prod(sp)) ** (2.0 / 3.0)
-    f255 = np.clip((gray - offset) * factor, 0.0, 255.0)
     vol255, mean255 = (image - offset) * factor, (gray - offset) * factor
-    spread = tetra_spread(vol255, overlaps, mean255)  # for the levels and the mixed rule
-    levels, levels_report = checked_levels(levels, pixel_sigma, f255, volume_vox, p, *spread)
+    f255 = np.clip(mean255, 0.0, 255.0)
+
+    def check_levels():  # the tetrahedra's spreads serve the levels and the mixed rule
+        spread = tetra_spread(vol255, overlaps, mean255)
+        return spread, checked_levels(levels, pixel_sigma, f255, volume_vox, p, *spread)
+    spread, (levels, levels_report) = run("level_check", 0.79, check_levels)
     # interior: most of the element's voxels are flat (the un-sharpened density below
     # half its range, as the flat pixels that measure the levels)
-    strength = density_volume(image, sp, density_sigma_px=p.flat_sigma_px,
-                              density_floor=p.density_floor,
+    strength = density_volume(image, sp, density_sigma_px=p.flat_sigma_px, density_floor=p.density_floor,
                               density_saturation=p.density_saturation, density_ridge=0.0)
     flat = (strength - p.density_floor) < 0.5
     interior = overlaps.tetra_mean(flat.astype(np.float64)) >= 0.5
@@ -366,8 +369,7 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
     if p.blur_correction and len(seg.mode_gray) > 1:
         def sharpen():
             level = region_levels(seg.material, f255, volume_vox, mesh.adjacency)
-            return blur_corrected_gray_3d(f255, mesh.points, mesh.tetrahedra, level,
-                                          vol255, sp,
+            return blur_corrected_gray_3d(f255, mesh.points, mesh.tetrahedra, level, vol255, sp,
                                           blur_min_self_weight=p.blur_min_self_weight,
                                           blur_max_px=p.blur_max_px, overlaps=overlaps)
         f_sharp, blur_px = run("blur_correction", 0.85, sharpen)
@@ -377,8 +379,7 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
     material, mixed = run("mixed_relabel", 0.89, relabel_mixed, vol255, mesh.points,
                           mesh.tetrahedra, material, levels, sp, mean_255=mean255,
                           adjacency=mesh.adjacency, overlaps=overlaps, spread=spread)
-    # the voxel noise from the flat voxels' 3 x 3 means (pixel_sigma): differences of
-    # neighbouring voxels would count the edges too, which on a porous volume are many
+    # noise of the flat voxels' 3 x 3 means: neighbour differences count a porous volume's edges
     material, beyond = run("iso50_relabel", 0.895, relabel_beyond_iso50, f255, material,
                            levels, mesh.adjacency, 3.0 * pixel_sigma)
     layer_vox = 4.0 * resolved_min_material_area(p.min_material_area, volume_vox)

@@ -48,7 +48,7 @@ def test_pipeline_invariants(case):
     np.testing.assert_allclose(np.bincount(p, ar, rows * cols).reshape(rows, cols), w, atol=1e-9)
     # CVT energy never increases
     e = np.array(seg.diagnostics["cvt_energy"])
-    assert np.all(np.diff(e) <= 1e-9 * max(e[0], 1e-300))
+    assert np.all(np.diff(e) <= 1e-9 * np.abs(e).max() + 1e-12)  # rounding of a zero energy
     # one material per triangle, numbered by ascending mean gray
     assert seg.material.shape == (len(seg.triangles),) and seg.material.min() == 0
     assert np.all(np.diff(seg.material_gray) > 0)

@@ -47,7 +47,8 @@ def test_pipeline_invariants_3d(case):
                                box_share(vol.shape), atol=1e-9)
     # CVT energy never increases
     e = np.array(seg.diagnostics["cvt_energy"])
-    assert np.all(np.diff(e) <= 1e-9 * max(e[0], 1e-300))
+    # (rounding allowed: an energy of zero, a constant density's, reads as +-1e-16)
+    assert np.all(np.diff(e) <= 1e-9 * np.abs(e).max() + 1e-12)
     # one material per tetrahedron, 0..K-1 all used, numbered by ascending mean gray
     assert seg.material.shape == (len(seg.tetrahedra),)
     assert set(np.unique(seg.material)) == set(range(seg.n_materials))
