@@ -10,8 +10,8 @@ from .convert import mesh_index_coordinates
 from .triangle_gray import MeshAndImageFilter
 
 # this filter's progress when each step of ctseg.stages3d.label_tetrahedra starts
-_STEPS_3D = {"level_check": 0.02, "graphcut": 0.05, "blur_correction": 0.45, "graphcut_2": 0.6, "mixed_relabel": 0.75, "iso50_relabel": 0.8,
-             "piece_relabel": 0.82, "manifold_repair": 0.85}
+_STEPS_3D = {"level_check": 0.02, "graphcut": 0.05, "blur_correction": 0.45, "graphcut_2": 0.6,
+             "mixed_relabel": 0.75, "iso50_relabel": 0.8, "piece_relabel": 0.82, "manifold_repair": 0.85}
 
 
 class GraphCutSegmentFilter(MeshAndImageFilter):
