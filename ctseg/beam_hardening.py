@@ -265,3 +265,102 @@ def _correct(img, levels, flat, p):
                                  streak_min_explained=p.streak_min_explained,
                                  streak_model=p.streak_model,
                                  streak_min_gain=p.streak_min_gain)
+
+
+STREAK_PROBE_STEP = 4
+"""In a volume, every this-many-th slice of each run of consecutive slices through metal
+is corrected first (the first slice of every run among them); the run's other slices are
+corrected only when one of those gets a weight (:func:`correct_streaks_volume`)."""
+
+
+def metal_slices(volume, levels, streak_sigma_px=DEFAULTS.streak_sigma_px):
+    """The z slices that hold metal as :func:`correct_metal_streaks` classifies it: a pixel
+    of the slice, smoothed by the same Gaussian, nearer the densest level than the next.
+
+    Parameters
+    ----------
+    volume : (nz, ny, nx) array_like
+    levels : (K,) array_like
+        Material levels in the volume's units.
+    streak_sigma_px : float
+
+    Returns
+    -------
+    (nz,) bool ndarray
+
+    Example
+    -------
+    >>> vol = np.zeros((4, 8, 8)); vol[1:3, 3:5, 3:5] = 100.0
+    >>> metal_slices(vol, [0.0, 100.0], 0.0).tolist()
+    [False, True, True, False]
+    """
+    lv = np.sort(np.asarray(levels, float).ravel())
+    vol = np.asarray(volume, float)
+    if lv.size < 2:
+        return np.zeros(len(vol), bool)
+    mid = 0.5 * (lv[-1] + lv[-2])
+    sigma = check("streak_sigma_px", streak_sigma_px)
+    return np.array([bool(np.any((ndimage.gaussian_filter(sl, sigma) if sigma > 0 else sl) > mid))
+                     for sl in vol])
+
+
+def correct_streaks_volume(volume, params=None, *, gray_scale, levels_255):
+    """The streak correction of every z slice of a volume against the volume's levels
+    (:func:`correct_streaks`), probing first: of each run of consecutive slices through
+    metal (:func:`metal_slices`) every :data:`STREAK_PROBE_STEP`-th slice is corrected;
+    the other metal slices are corrected only if a probed slice got a weight (a metal
+    part's streaks repeat in the slices through it; where the probes find none, the fit on
+    every other slice is spared). Slices without metal are left as they are, as
+    :func:`correct_metal_streaks` leaves them.
+
+    Parameters
+    ----------
+    volume : (nz, ny, nx) array_like
+    params : ctseg.params.SegmentParams or dict, optional
+    gray_scale : (offset, factor)
+        The volume's map onto 0-255.
+    levels_255 : (K,) array_like
+        The volume's material levels (0-255 scale); the parameter ``gray_levels`` first.
+
+    Returns
+    -------
+    image : (nz, ny, nx) float64 ndarray
+    weights : list of float
+        Each slice's weight (0 where not corrected).
+    probed : int
+        Slices probed.
+
+    Example
+    -------
+    >>> vol = np.zeros((3, 16, 16)); vol[:, 6:10, 6:10] = 100.0
+    >>> out, weights, probed = correct_streaks_volume(vol, gray_scale=(0.0, 2.55),
+    ...                                               levels_255=[0.0, 255.0])
+    >>> probed, weights, bool(np.array_equal(out, vol))  # no streak: slices 1-2 spared
+    (1, [0.0, 0.0, 0.0], True)
+    """
+    p = resolve(params)
+    vol = np.asarray(volume, np.float64)
+    offset, factor = gray_scale
+    if p.gray_levels != AUTO:
+        levels = np.asarray(p.gray_levels, float)
+    else:
+        levels = np.asarray(levels_255, float) / factor + offset if factor else np.array([offset])
+    metal = metal_slices(vol, levels, p.streak_sigma_px)
+    probes, into_run = [], 0  # every STREAK_PROBE_STEP-th slice of a run, from its first
+    for k in np.flatnonzero(metal):
+        into_run = into_run + 1 if k > 0 and metal[k - 1] else 0
+        if into_run % STREAK_PROBE_STEP == 0:
+            probes.append(int(k))
+    out = vol.copy()
+    weights = np.zeros(len(vol))
+
+    def correct(k):
+        fix = correct_streaks(vol[k], p, gray_scale=gray_scale, levels_255=levels_255)
+        out[k], weights[k] = fix.image, fix.weight
+
+    for k in probes:
+        correct(k)
+    if np.any(weights[probes] > 0):
+        for k in np.setdiff1d(np.flatnonzero(metal), probes):
+            correct(int(k))
+    return out, [float(w) for w in weights], int(len(probes))

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ._validate import as_volume, check_spacing
-from .beam_hardening import correct_streaks
+from .beam_hardening import correct_streaks_volume
 from .errors import InputError
 from .levels import volume_levels
 from .params import AUTO, resolve
@@ -128,12 +128,14 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     Notes
     -----
     The material levels are the volume's (:func:`ctseg.levels.volume_levels`); with
-    ``streak_correction`` every z slice is first corrected against them, as in slices
-    mode. Where the flat voxels hold partial volume (their spread more than twice the
-    tetrahedra's), the labelling takes the levels of the tetrahedron grays instead, and a
-    level that the homogeneous tetrahedra (voxels spreading as the noise) show between two
-    levels, and none explains, is added (:func:`ctseg.levels3d.checked_levels`;
-    ``diagnostics["levels"]`` says which).
+    ``streak_correction`` every z slice through metal is first corrected against them,
+    as in slices mode, once a probe of every 4th such slice finds streaks
+    (:func:`ctseg.beam_hardening.correct_streaks_volume`). Where the flat voxels hold
+    partial volume (their spread more than twice the tetrahedra's), the labelling takes
+    the levels of the tetrahedron grays instead, and a level that the homogeneous
+    tetrahedra (voxels spreading as the noise) show between two levels, and none
+    explains, is added (:func:`ctseg.levels3d.checked_levels`; ``diagnostics["levels"]``
+    says which).
     Tetrahedra straddling a boundary whose voxels mostly vote for other materials are
     relabelled (:func:`ctseg.mixed_tetra.relabel_mixed`; ``diagnostics["relabelled_mixed"]``),
     and between two materials of high contrast a boundary tetrahedron whose gray lies beyond
@@ -176,16 +178,11 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
 
     image = vol.astype(np.float64)
     scale, levels, pixel_sigma, _ = timed("levels", 0.0, volume_levels, image, p, 0)
-    streak_weights = []
+    streak_weights, streak_probed = [], 0
     if p.streak_correction and len(levels) > 1:
-        def correct():
-            out = np.empty_like(image)
-            for k in range(image.shape[0]):
-                fix = correct_streaks(image[k], p, gray_scale=scale, levels_255=levels)
-                out[k] = fix.image
-                streak_weights.append(float(fix.weight))
-            return out
-        image = timed("streak_correction", 0.02, correct)
+        image, streak_weights, streak_probed = timed(
+            "streak_correction", 0.02, correct_streaks_volume, image, p, gray_scale=scale,
+            levels_255=levels)
     n_sites, site_report = timed("site_budget", 0.04, n_sites_3d, image, p)
     check_memory(max(0, n_sites - default_n_sites_3d(image.shape, p.voxels_per_site))
                  * SITE_3D_BYTES + image.size * VOLUME_3D_BYTES_PER_VOXEL,
@@ -252,6 +249,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "element_quality": quality,
         "slivers_left": int(slivers),
         "streak_weights": streak_weights,
+        "streak_slices_probed": streak_probed,
         "surfaces": [{"material": s.material, "triangles": int(len(s.triangles)),
                       "vertices": int(len(s.points)), "enclosed_volume": s.enclosed_volume,
                       "element_volume": s.element_volume} for s in surfaces],
