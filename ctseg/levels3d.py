@@ -154,9 +154,10 @@ def checked_levels(levels_255, flat_sigma_255, gray_255, volume, params=None, sp
     volume, with the levels the homogeneous tetrahedra add (see the module's docstring;
     only with ``spread_255`` and ``noise_255``). A given ``n_materials`` keeps the count
     of the flat voxels' levels, which honour it: with hidden levels (:func:`hidden_levels`)
-    the levels are the ``n_materials`` of both that hold the most tetrahedron volume, each
-    tetrahedron counted at its nearest level (a level the count forced out of a
-    partial-volume bump gives way to the hidden material).
+    the levels are the lowest and the highest of the count's (a clipped end is a material
+    of its own) and, of the others and the hidden ones, those that hold the most
+    tetrahedron volume, each tetrahedron counted at its nearest level (a level the count
+    forced out of a partial-volume bump gives way to the hidden material).
 
     Returns
     -------
@@ -191,10 +192,12 @@ def checked_levels(levels_255, flat_sigma_255, gray_255, volume, params=None, sp
             both = np.sort(np.concatenate([levels_255, hidden]))
             nearest = np.abs(np.asarray(gray_255, float)[:, None] - both[None, :]).argmin(axis=1)
             held = np.bincount(nearest, weights=np.asarray(volume, float), minlength=len(both))
+            held[[0, -1]] = np.inf  # the outermost stay: a clipped end is a material of its own
             kept = both[np.sort(np.argsort(-held, kind="stable")[:len(levels_255)])]
-            report.update(method="homogeneous_tetrahedra",
-                          homogeneous_added_255=[float(v) for v in np.setdiff1d(kept, levels_255)])
-            levels_255 = kept
+            if not np.array_equal(kept, levels_255):
+                report.update(method="homogeneous_tetrahedra", homogeneous_added_255=[
+                    float(v) for v in np.setdiff1d(kept, levels_255)])
+                levels_255 = kept
         return levels_255, report
     t_levels, t_sigma = tetra_levels(gray_255, volume, p)
     report.update(tetra_sigma_255=t_sigma, tetra_levels_255=[float(v) for v in t_levels])

@@ -115,14 +115,17 @@ def test_a_thin_polymer_layer_gets_its_level(monkeypatch):
 def test_given_material_count_gives_way_to_a_hidden_level():
     rng = np.random.default_rng(6)
     gray, vol, spread = _coated(rng)
-    three = SegmentParams().replace(n_materials=3)
+    three, four = (SegmentParams().replace(n_materials=k) for k in (3, 4))
     # the count's third level forced out of a bump at 200, which no tetrahedron is near
-    levels, rep = checked_levels(np.array([20.0, 80.0, 200.0]), 2.5, gray, vol, three, spread, 5.0)
-    assert rep["method"] == "homogeneous_tetrahedra" and np.allclose(levels, (20, 45, 80), atol=1.5)
+    levels, rep = checked_levels(np.array([20.0, 80.0, 200.0, 250.0]), 2.5, gray, vol, four, spread, 5.0)
+    assert rep["method"] == "homogeneous_tetrahedra" and np.allclose(levels, (20, 45, 80, 250), atol=1.5)
     # the polymer already among the levels: nothing hidden, kept as they are
     flat = np.array([21.0, 44.0, 79.0])
     levels, rep = checked_levels(flat, 2.5, gray, vol, three, spread, 5.0)
     assert rep["method"] == "flat_voxels" and np.array_equal(levels, flat)
+    # the outermost levels stay however little they hold (a clipped end, say)
+    levels, rep = checked_levels(np.array([20.0, 80.0, 250.0]), 2.5, gray, vol, three, spread, 5.0)
+    assert rep["method"] == "flat_voxels" and np.allclose(levels, (20, 80, 250))
     # without the spreads: the count's levels
     levels, rep = checked_levels(np.array([20.0, 80.0, 200.0]), 2.5, gray, vol, three)
     assert rep["method"] == "flat_voxels" and np.allclose(levels, (20, 80, 200))
