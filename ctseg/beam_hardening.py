@@ -153,12 +153,7 @@ def correct_metal_streaks(image, levels, *, flat=None,
     if lv.size < 2:
         return StreakCorrection(img, reason="fewer than two materials")
 
-    def classify(im):
-        smooth = ndimage.gaussian_filter(im, sigma) if sigma > 0 else im
-        # nearest level by the midpoints between levels
-        return np.searchsorted((lv[1:] + lv[:-1]) / 2.0, smooth)
-
-    classes = classify(img)
+    classes = _nearest_level(img, lv, sigma)
     metal = classes == lv.size - 1
     n_metal = int(metal.sum())
     if n_metal == 0 or n_metal == img.size:
@@ -184,7 +179,7 @@ def correct_metal_streaks(image, levels, *, flat=None,
             if weight <= 0.0:
                 return None
             change = sum(w * b for w, b in zip(weights, bases))
-            new_classes = classify(img + change)
+            new_classes = _nearest_level(img + change, lv, sigma)
             if np.array_equal(new_classes, classes):  # a fixed point: later rounds repeat it
                 break
             classes = new_classes
@@ -208,6 +203,18 @@ def correct_metal_streaks(image, levels, *, flat=None,
     return StreakCorrection(img + change, weight=float(weight), explained=float(explained),
                             metal_pixels=n_metal, max_change=max_change,
                             weights=tuple(float(w) for w in weights))
+
+
+def _nearest_level(image, levels, sigma):
+    """Each pixel's class: the index of the (ascending) level nearest its gray after a
+    Gaussian of ``sigma``, by the midpoints between levels."""
+    smooth = ndimage.gaussian_filter(image, sigma) if sigma > 0 else image
+    return np.searchsorted((levels[1:] + levels[:-1]) / 2.0, smooth)
+
+
+def _levels_in_units(levels_255, offset, factor):
+    """0-255 levels back in the image's units."""
+    return np.asarray(levels_255, float) / factor + offset if factor else np.array([offset])
 
 
 def correct_streaks(image, params=None, *, gray_scale=None, levels_255=None, **overrides):
@@ -254,8 +261,7 @@ def correct_streaks(image, params=None, *, gray_scale=None, levels_255=None, **o
             g255, flat, merge_k=p.merge_k, merge_rel=p.merge_rel,
             merge_floor_255=p.merge_floor_255, merge_threshold_255=p.merge_threshold_255,
             level_min_fraction=p.level_min_fraction, n_materials=p.n_materials)[0]
-    levels = levels255 / factor + offset if factor else np.array([offset])
-    return _correct(img, levels, flat, p)
+    return _correct(img, _levels_in_units(levels255, offset, factor), flat, p)
 
 
 def _correct(img, levels, flat, p):
@@ -298,10 +304,8 @@ def metal_slices(volume, levels, streak_sigma_px=DEFAULTS.streak_sigma_px):
     vol = np.asarray(volume, float)
     if lv.size < 2:
         return np.zeros(len(vol), bool)
-    mid = 0.5 * (lv[-1] + lv[-2])
     sigma = check("streak_sigma_px", streak_sigma_px)
-    return np.array([bool(np.any((ndimage.gaussian_filter(sl, sigma) if sigma > 0 else sl) > mid))
-                     for sl in vol])
+    return np.array([bool(np.any(_nearest_level(sl, lv, sigma) == lv.size - 1)) for sl in vol])
 
 
 def correct_streaks_volume(volume, params=None, *, gray_scale, levels_255):
@@ -340,11 +344,8 @@ def correct_streaks_volume(volume, params=None, *, gray_scale, levels_255):
     """
     p = resolve(params)
     vol = np.asarray(volume, np.float64)
-    offset, factor = gray_scale
-    if p.gray_levels != AUTO:
-        levels = np.asarray(p.gray_levels, float)
-    else:
-        levels = np.asarray(levels_255, float) / factor + offset if factor else np.array([offset])
+    levels = (np.asarray(p.gray_levels, float) if p.gray_levels != AUTO
+              else _levels_in_units(levels_255, *gray_scale))
     metal = metal_slices(vol, levels, p.streak_sigma_px)
     probes, into_run = [], 0  # every STREAK_PROBE_STEP-th slice of a run, from its first
     for k in np.flatnonzero(metal):
