@@ -1,8 +1,9 @@
 """The method in 3D (SPEC 9): a volume -> segmented tetrahedra and closed per-material
 surfaces, from the gray values at once (no label map first).
 
-:func:`segment_volume_3d` runs the stages of :mod:`ctseg.stages3d` in order (the VTK stage
-filters call the same functions one at a time)."""
+:func:`segment_volume_3d` runs the stages of :mod:`ctseg.stages3d` and the labelling of
+:mod:`ctseg.labelling3d` in order (the VTK stage filters call the same functions one at a
+time)."""
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -14,8 +15,9 @@ from .levels import volume_levels
 from .params import AUTO, resolve
 from .pipeline import monotone_progress, stage_runner
 from .resources import SITE_3D_BYTES, VOLUME_3D_BYTES_PER_VOXEL, check_memory
+from .labelling3d import label_tetrahedra
 from .stages3d import (cvt_sites_3d, default_n_sites_3d, density_3d,  # noqa: F401 (re-export)
-                       label_tetrahedra, n_sites_3d, subpixel_boundary_3d, tetrahedra_3d)
+                       n_sites_3d, subpixel_boundary_3d, tetrahedra_3d)
 from .surfaces import material_interfaces, material_surface
 from .tetra_gray import VoxelOverlaps
 from .tetrahedra import tetra_quality
@@ -99,8 +101,8 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     tetrahedron graph with the levels and rules of 2D (9.6) -> with ``subpixel_boundary``,
     vertices between two materials moved to the ISO-50 crossing (SPEC 10,
     :func:`ctseg.stages3d.subpixel_boundary_3d`) -> interfaces and closed surfaces per
-    material (9.7). Each stage is a function of :mod:`ctseg.stages3d`, which
-    the VTK stage filters call too.
+    material (9.7). Each stage is a function of :mod:`ctseg.stages3d` (the labelling of
+    :mod:`ctseg.labelling3d`), which the VTK stage filters call too.
 
     Parameters
     ----------

@@ -2,14 +2,15 @@
 (triangles over a slice, or tetrahedra over a volume)."""
 from ctseg.errors import InputError
 from ctseg.labelling import label_mesh
-from ctseg.stages3d import label_tetrahedra, tetra_mesh
+from ctseg.labelling3d import label_tetrahedra
+from ctseg.stages3d import tetra_mesh
 from ctseg.triangulation import triangle_mesh
 
 from .base import spec_names
 from .convert import mesh_index_coordinates
 from .triangle_gray import MeshAndImageFilter
 
-# this filter's progress when each step of ctseg.stages3d.label_tetrahedra starts
+# this filter's progress when each step of ctseg.labelling3d.label_tetrahedra starts
 _STEPS_3D = {"level_check": 0.02, "graphcut": 0.05, "blur_correction": 0.45, "graphcut_2": 0.6,
              "mixed_relabel": 0.75, "iso50_relabel": 0.8, "piece_relabel": 0.82, "manifold_repair": 0.85}
 
@@ -21,7 +22,7 @@ class GraphCutSegmentFilter(MeshAndImageFilter):
     (vtkPolyData) over a slice or tetrahedra (vtkUnstructuredGrid) over a volume; input 1:
     the vtkImageData, the slice or the volume, whose flat pixels give the material gray
     levels. Triangles: :func:`ctseg.label_mesh`, as the slices mode labels a slice.
-    Tetrahedra: :func:`ctseg.stages3d.label_tetrahedra` with the image's spacing, as the 3D
+    Tetrahedra: :func:`ctseg.labelling3d.label_tetrahedra` with the image's spacing, as the 3D
     mode labels them (the volume's levels, interior elements by their flat voxels, the
     blur correction in 3D, pinched edges repaired so that every material's surface is
     manifold). The 3D stage chain has no streak correction (MetalStreakFilter takes one

@@ -122,7 +122,7 @@ def test_iso50_rule_moves_boundary_elements_once_between_adjacent_contrasted_lev
 def test_iso50_rule_reopens_narrow_gaps_of_a_granular_volume(monkeypatch):
     """Ground truth: packed balls. The graph cut closes narrow air gaps (ice comes out
     +5 to +7 points); the rule reopens them, and ceasing it loses what it gained."""
-    import ctseg.stages3d
+    import ctseg.labelling3d
 
     from ctseg.phantoms_granular3d import make_granular_3d
 
@@ -132,7 +132,7 @@ def test_iso50_rule_reopens_narrow_gaps_of_a_granular_volume(monkeypatch):
     lab = tetra_label_volume(seg.points, seg.tetrahedra, seg.material, vol.shape)
     dice_on = ctseg.metrics.dice_per_label(lab, truth, 2)
     assert seg.diagnostics["relabelled_iso50"] > 0
-    monkeypatch.setattr(ctseg.stages3d, "relabel_beyond_iso50", lambda f, m, *a: (np.asarray(m), 0))
+    monkeypatch.setattr(ctseg.labelling3d, "relabel_beyond_iso50", lambda f, m, *a: (np.asarray(m), 0))
     off = segment_volume_3d(vol)
     lab_off = tetra_label_volume(off.points, off.tetrahedra, off.material, vol.shape)
     dice_off = ctseg.metrics.dice_per_label(lab_off, truth, 2)

@@ -105,11 +105,11 @@ def test_a_constant_volume_is_one_material():
 def test_face_area_weighting_passes_the_shared_face_areas(monkeypatch):
     # every tetrahedron's four faces count each shared face twice and each box face once
     # (the vertices as labelled: no sub-voxel move after the cut)
-    import ctseg.stages3d as stages3d
+    import ctseg.labelling3d as labelling3d
 
     seen = []
-    real = stages3d.segment_triangles
-    monkeypatch.setattr(stages3d, "segment_triangles",
+    real = labelling3d.segment_triangles
+    monkeypatch.setattr(labelling3d, "segment_triangles",
                         lambda *a, **kw: seen.append(kw["edge_length"]) or real(*a, **kw))
     ph = make_volume(8, 24, seed=2)
     spacing = np.array([0.2, 0.2, 0.5])
