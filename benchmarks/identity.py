@@ -55,7 +55,7 @@ def main(argv=None):
         rec[name] = _record(run())
         print(name, rec[name]["n_triangles"], flush=True)
     vol = make_volume(16, 96, seed=3)
-    vseg = segment_volume(vol.image)
+    vseg = segment_volume(vol.image, mode="slices")
     for k, s in enumerate(vseg.slices):
         rec[f"volume slice {k}"] = _record(s)
     with open(args.out, "w") as fh:

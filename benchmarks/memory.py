@@ -27,7 +27,7 @@ base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 t0 = time.perf_counter()
 if kind == "volume":
     from ctseg.volume import segment_volume
-    res = segment_volume(data, n_jobs=jobs)
+    res = segment_volume(data, mode="slices", n_jobs=jobs)
     n_tri = res.diagnostics["n_triangles"]
 else:
     import ctseg

@@ -64,13 +64,13 @@ def _progress_printer(enabled):
     return report
 
 
-def _check_outputs(args):
+def _check_outputs(args, mode):
     """Refuse bad output paths (and options of the other mode) before hours of work."""
     from ctseg.filters.figure import offscreen_window
     from ctseg.filters.writers import MESH_FORMATS, check_output_path
     from ctseg.filters.writers3d import check_tetra_output_path
 
-    if args.params_obj.mode == "3d":
+    if mode == "3d":
         if args.boundary:
             raise ParameterError("--boundary: the boundary polylines are slices mode's; in 3D "
                                  "mode the interface triangles go to --surfaces OUT.vtp")
@@ -94,21 +94,24 @@ def _mesh(args):
 
     from .geometry import slice_axis, volume_slice
     from .metrics import evaluate, evaluate_volume
-    from .volume import segment_array
+    from .volume import segment_array, volume_mode
 
-    _check_outputs(args)
     image, geom = read_image(args.input, series=args.series)
     image = _checked_input(np.asarray(image), args.input)
+    params = args.params_obj
+    mode, mode_note = volume_mode(image.shape, params.mode)
+    if image.ndim == 3:
+        params = params.replace(mode=mode)  # decided once, on this machine's memory now
+    _check_outputs(args, mode)
     show = sys.stderr.isatty() and not args.quiet
     progress = _progress_printer(show)
-    params = args.params_obj
     truth = _read_truth(args.truth, image.shape)
-    if params.mode == "3d":
+    if mode == "3d":
         from ctseg.filters.job3d import segment_and_write_3d
 
         if args.resume or args.dask:
-            print("ctseg: note: --resume and --dask apply to slices mode; 3D mode runs here, "
-                  "in one go", file=sys.stderr)
+            print("ctseg: note: --resume and --dask apply to slices mode (--mode slices); 3D "
+                  "mode runs here, in one go", file=sys.stderr)
         diag, written = segment_and_write_3d(image, geom, params, args.output, args.surfaces,
                                              args.figure, truth, progress, name=args.input)
         diag["input"] = os.path.abspath(args.input)
@@ -135,6 +138,8 @@ def _mesh(args):
         diag["slices"] = [{"n_triangles": s.diagnostics["n_triangles"],
                            "lloyd_iterations": s.diagnostics["lloyd_iterations"],
                            "total_time_s": s.diagnostics["total_time_s"]} for s in result.slices]
+    if mode_note:
+        diag["mode_note"] = mode_note
     mesh, boundary = segmentation_to_polydata(result, geom)
     written, checks = write_mesh(mesh, args.output)
     diag["input"] = os.path.abspath(args.input)
@@ -163,6 +168,8 @@ def _finish(args, image, diag, written):
     if getattr(args, "checkpoint", None):
         shutil.rmtree(args.checkpoint, ignore_errors=True)  # everything is written
     if not args.quiet:
+        if diag.get("mode_note"):  # after the work: a refusal stays one line
+            print(f"ctseg: note: {diag['mode_note']}", file=sys.stderr)
         if diag.get("mode") == "3d":
             from ctseg.filters.job3d import summary_lines_3d
 

@@ -237,9 +237,9 @@ class VolumeParams(_Group):
     result)."""
 
     group = "volume"
-    mode: str = _param("slices", "choice", "how a volume is meshed: slice by slice "
-                       "(triangles per slice) or in 3D (tetrahedra and closed surfaces)",
-                       choices=("slices", "3d"), vtk="Mode", cli="--mode")
+    mode: str = _param("auto", "choice", "how a volume is meshed: in 3D (tetrahedra, closed surfaces), slice by "
+                       "slice (triangles), or auto: 3D where the memory allows it, else slices", choices=(
+                           "auto", "slices", "3d"), vtk="Mode", cli="--mode")
     axis: str = _param("z", "choice", "slice axis of a volume in slices mode",
                        choices=("z", "y", "x"), vtk="SliceAxis", cli="--axis")
     n_jobs: int = _param(AUTO, "int", "worker processes for a volume's slices (1 = this "

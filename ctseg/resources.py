@@ -45,6 +45,13 @@ def slice_bytes(rows, cols):
     return SLICE_BYTES_PER_PIXEL * int(rows) * int(cols)
 
 
+def fits_in_memory(needed):
+    """Whether ``needed`` bytes fit in what the system has available (True where unknown),
+    and that amount (None where unknown)."""
+    have = available_bytes()
+    return have is None or needed <= have, have
+
+
 def check_memory(needed, what, hint=""):
     """Raise InputError when ``needed`` bytes exceed what the system has available.
 

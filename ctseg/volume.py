@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._validate import as_volume
-from .errors import CTSegError, InputError, ParameterError
+from .errors import CTSegError, ParameterError
 from .geometry import slice_axis, volume_slice
 from .levels import LEVEL_SAMPLE_VOXELS, volume_levels
 from .params import AUTO, resolve
@@ -16,7 +16,7 @@ from .checkpoint import Checkpoint
 from .pipeline import segment_image
 from .pipeline3d import segment_volume_3d
 from .resources import (LEVEL_BYTES_PER_VOXEL, RESULT_BYTES_PER_VOXEL, VOLUME_3D_BYTES_PER_VOXEL,
-                        check_memory, slice_bytes)
+                        check_memory, fits_in_memory, slice_bytes)
 
 @dataclass
 class VolumeSegmentation:
@@ -132,10 +132,11 @@ def _slice_result(get, k):
 
 def segment_volume(volume, params=None, *, spacing=None, client=None, progress=None,
                    keep_maps=(), checkpoint=None, **overrides):
-    """Segment a 3D volume slice by slice into triangle meshes with one numbering of the
-    materials for the whole volume.
+    """Segment a 3D volume into tetrahedra (mode '3d') or, slice by slice, into triangle
+    meshes with one numbering of the materials for the whole volume (mode 'slices'); mode
+    'auto', the default, chooses by :func:`volume_mode`.
 
-    The gray map onto 0-255 and the material levels are measured once on the volume
+    In slices mode the gray map onto 0-255 and the material levels are measured once on the volume
     (:func:`ctseg.levels.volume_levels`), then every slice is
     segmented against them (:func:`ctseg.segment_image` with ``gray_scale`` and
     ``levels_255``): material k is the same material in every slice, whether or not a
@@ -168,8 +169,8 @@ def segment_volume(volume, params=None, *, spacing=None, client=None, progress=N
 
     Returns
     -------
-    VolumeSegmentation, or ctseg.pipeline3d.TetraSegmentation with ``mode='3d'``
-        (:func:`ctseg.pipeline3d.segment_volume_3d`: tetrahedra and closed surfaces).
+    VolumeSegmentation (slices), or ctseg.pipeline3d.TetraSegmentation (3D:
+        :func:`ctseg.pipeline3d.segment_volume_3d`, tetrahedra and closed surfaces).
 
     Raises
     ------
@@ -181,14 +182,15 @@ def segment_volume(volume, params=None, *, spacing=None, client=None, progress=N
     Example
     -------
     >>> from ctseg.phantoms import make_volume
-    >>> vseg = segment_volume(make_volume(3, 48).image, n_sites=120, n_jobs=1)
+    >>> vseg = segment_volume(make_volume(3, 48).image, mode="slices", n_sites=120, n_jobs=1)
     >>> len(vseg.slices)
     3
     """
     if "axis" in overrides and not isinstance(overrides["axis"], str):
         overrides["axis"] = "zyx"[slice_axis(overrides["axis"])]
     p = resolve(params, **overrides)
-    if p.mode == "3d":
+    mode, mode_note = volume_mode(np.shape(volume), p.mode)
+    if mode == "3d":
         shape = np.shape(volume)
         check_memory(int(np.prod(shape)) * VOLUME_3D_BYTES_PER_VOXEL,
                      f"meshing a {' x '.join(map(str, shape))} volume in 3D",
@@ -251,6 +253,8 @@ def segment_volume(volume, params=None, *, spacing=None, client=None, progress=N
             times[name] = times.get(name, 0.0) + t
     diagnostics = {
         "volume_shape": list(vol.shape),
+        "mode": "slices",
+        "mode_note": mode_note,
         "axis": "zyx"[ax],
         "n_slices": int(n_slices),
         "executor": executor,
@@ -287,7 +291,12 @@ def segment_array(array, params=None, *, spacing=None, progress=None, client=Non
 
     Returns
     -------
-    SegmentedMesh or VolumeSegmentation
+    SegmentedMesh, VolumeSegmentation or ctseg.pipeline3d.TetraSegmentation
+
+    Raises
+    ------
+    InputError
+        Mode '3d' for a single slice; and as :func:`segment_volume`.
 
     Example
     -------
@@ -297,10 +306,48 @@ def segment_array(array, params=None, *, spacing=None, progress=None, client=Non
     'SegmentedMesh'
     """
     arr = np.asarray(array)
-    if arr.ndim == 2:
-        if resolve(params, **overrides).mode == "3d":
-            raise InputError(f"mode '3d': the input is a single {arr.shape[0]} x {arr.shape[1]} "
-                             "slice; 3D mode needs a volume (use slices mode for a slice)")
+    if arr.ndim == 2 and volume_mode(arr.shape, resolve(params, **overrides).mode)[0] == "slices":
         return segment_image(arr, params, progress=progress, **overrides)
     return segment_volume(arr, params, spacing=spacing, client=client, progress=progress,
                           keep_maps=keep_maps, checkpoint=checkpoint, **overrides)
+
+
+def volume_mode(shape, mode=AUTO):
+    """How an input of ``shape`` is meshed: in 3D ('3d') or slice by slice ('slices').
+
+    An explicit 'slices' or '3d' is kept (3D mode refuses an input thinner than 2 voxels
+    along any axis). 'auto' gives '3d' to a volume of at least 2 voxels along every axis
+    whose 3D mode fits in the memory available
+    (:data:`ctseg.resources.VOLUME_3D_BYTES_PER_VOXEL` per voxel), else 'slices'; a
+    (rows, cols) input is one slice.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        The input's shape, (rows, cols) or (nz, ny, nx).
+    mode : {'auto', 'slices', '3d'}
+
+    Returns
+    -------
+    mode : {'slices', '3d'}
+    note : str
+        Why 'auto' chose slices for a volume 3D mode could mesh ('' otherwise).
+
+    Example
+    -------
+    >>> volume_mode((40, 64, 64)), volume_mode((1, 64, 64))[0], volume_mode((64, 64))[0]
+    (('3d', ''), 'slices', 'slices')
+    """
+    shape = tuple(int(n) for n in shape)
+    if mode != AUTO:
+        return mode, ""
+    if len(shape) == 2:
+        return "slices", ""
+    if min(shape) < 2:  # a slice in a volume's clothes
+        return "slices", ""
+    needed = int(np.prod(shape)) * VOLUME_3D_BYTES_PER_VOXEL
+    fits, have = fits_in_memory(needed)
+    if not fits:
+        return "slices", (f"mode auto: slices, 3D mode would need about {needed / 2 ** 30:.1f} "
+                          f"GiB of memory and {have / 2 ** 30:.1f} GiB are available")
+    return "3d", ""

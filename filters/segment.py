@@ -4,10 +4,11 @@
 ``segment_array`` (the one slice-or-volume dispatch of :mod:`ctseg.volume`) is offered here
 too, so that the application plugins reach ctseg through the VTK layer only."""
 from vtkmodules.vtkCommonDataModel import vtkDataObject, vtkPolyData, vtkUnstructuredGrid
+from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline
 
 from ctseg.errors import InputError
 from ctseg.params import SPECS
-from ctseg.volume import segment_array
+from ctseg.volume import segment_array, volume_mode
 
 from .base import CTSegAlgorithm
 from .convert import image_to_array, segmentation_to_polydata
@@ -25,9 +26,12 @@ class CTSegmentFilter(CTSegAlgorithm):
     numbering for the whole volume), ``gray`` (input units) and ``slice``; output 1 the
     material boundaries as polylines with ``material_a``, ``material_b`` and ``slice``.
 
+    Mode 'auto' (the default) meshes a volume in 3D where the memory allows it
+    (:func:`ctseg.volume.volume_mode`), else slice by slice, and a single slice in triangles.
+
     3D mode: output 0 the tetrahedra (vtkUnstructuredGrid) in world coordinates with
     ``material`` and ``gray``; output 1 the interface triangles (vtkPolyData) with
-    ``material_a`` < ``material_b``, normals from a to b. A single slice is refused.
+    ``material_a`` < ``material_b``, normals from a to b. Mode '3d' refuses a single slice.
 
     Parameters: every parameter of :mod:`ctseg.params` (``ctseg params`` lists them), each
     as Set/Get of its VTK name (SetNumberOfSites, SetLambda, SetSliceAxis, SetMode,
@@ -42,6 +46,7 @@ class CTSegmentFilter(CTSegAlgorithm):
         super().__init__(input_type="vtkImageData", n_outputs=2, output_type="vtkPolyData")
         self._client = None
         self.result = None  # the last SegmentedMesh, VolumeSegmentation or TetraSegmentation
+        self._mode = None  # 'slices' or '3d', decided with the output's type
 
     def SetDaskClient(self, client):
         """A distributed.Client or a scheduler address ('tcp://host:8786'); None = local."""
@@ -60,7 +65,16 @@ class CTSegmentFilter(CTSegAlgorithm):
         return 1
 
     def RequestDataObject(self, request, in_info, out_info):
-        types = (vtkUnstructuredGrid if self.params.mode == "3d" else vtkPolyData, vtkPolyData)
+        # Mode 'auto' needs the input's shape, which upstream tells only in its information
+        # pass: run it now (the pipeline runs it next anyway), so the shape is never stale
+        ext = None
+        if self.GetNumberOfInputConnections(0):
+            self.GetInputAlgorithm(0, 0).UpdateInformation()
+            ext = in_info[0].GetInformationObject(0).Get(vtkStreamingDemandDrivenPipeline.WHOLE_EXTENT())
+        dims = [ext[2 * a + 1] - ext[2 * a] + 1 for a in range(3)] if ext else [2, 2, 2]
+        shape = tuple(dims[::-1]) if dims[2] > 1 else (dims[1], dims[0])
+        self._mode = "3d" if self.params.mode == "3d" else volume_mode(shape, self.params.mode)[0]
+        types = (vtkUnstructuredGrid if self._mode == "3d" else vtkPolyData, vtkPolyData)
         for port, cls in enumerate(types):
             info = out_info.GetInformationObject(port)
             current = info.Get(vtkDataObject.DATA_OBJECT())
@@ -70,12 +84,13 @@ class CTSegmentFilter(CTSegAlgorithm):
 
     def _request(self, request, in_info, out_info):
         arr, geom = image_to_array(self._input(in_info))
-        three_d = self.params.mode == "3d"
+        three_d = self._mode == "3d"  # as the output's type was chosen
         if three_d and arr.ndim != 3:
             raise InputError(f"image: shape {arr.shape} is one slice; Mode '3d' needs a volume "
                              "of at least 2 voxels along every axis (use Mode 'slices')")
         self.UpdateProgress(0.0)
-        result = segment_array(arr, self.params, spacing=geom.spacing, client=self._client,
+        params = self.params.replace(mode=self._mode) if arr.ndim == 3 else self.params
+        result = segment_array(arr, params, spacing=geom.spacing, client=self._client,
                                progress=self._progress())
         self.result = result
         if three_d:

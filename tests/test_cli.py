@@ -148,7 +148,7 @@ def test_volume_from_nrrd_to_ply_with_truth(tmp_path, capsys):
     p = make_volume(5, 96, seed=2)
     nrrd.write(str(tmp_path / "v.nrrd"), p.image, {"spacings": [0.1, 0.1, 0.3]}, index_order="C")
     np.save(tmp_path / "t.npy", p.truth)
-    rc = main(["mesh", str(tmp_path / "v.nrrd"), "-o", str(tmp_path / "v.ply"), "--sites", "350",
+    rc = main(["mesh", str(tmp_path / "v.nrrd"), "-o", str(tmp_path / "v.ply"), "--mode", "slices", "--sites", "350",
                "--jobs", "2", "--truth", str(tmp_path / "t.npy"),
                "--report", str(tmp_path / "r.json")])
     assert rc == 0
@@ -181,7 +181,7 @@ def test_interrupt_leaves_no_partial_output_and_resume_finishes(tmp_path, monkey
 
     vol = make_volume(4, 48, seed=1).image
     np.save(tmp_path / "v.npy", vol)
-    cmd = ["mesh", str(tmp_path / "v.npy"), "-o", str(tmp_path / "m.vtp"), "--jobs", "1",
+    cmd = ["mesh", str(tmp_path / "v.npy"), "-o", str(tmp_path / "m.vtp"), "--mode", "slices", "--jobs", "1",
            "--sites", "60", "--report", str(tmp_path / "r.json")]
     monkeypatch.setattr(ctseg.volume, "_segment_slice", interrupted)
     assert main(cmd) == 130
@@ -204,8 +204,8 @@ def test_resume_refuses_slices_of_other_parameters(tmp_path, capsys):
 
     vol = make_volume(3, 40, seed=2).image
     np.save(tmp_path / "v.npy", vol)
-    segment_volume(vol, n_sites=50, checkpoint=checkpoint_folder(tmp_path / "m.vtp"))
-    assert main(["mesh", str(tmp_path / "v.npy"), "-o", str(tmp_path / "m.vtp"), "--jobs", "1",
+    segment_volume(vol, mode="slices", n_sites=50, checkpoint=checkpoint_folder(tmp_path / "m.vtp"))
+    assert main(["mesh", str(tmp_path / "v.npy"), "-o", str(tmp_path / "m.vtp"), "--mode", "slices", "--jobs", "1",
                  "--sites", "60", "--resume"]) == 2
     err = capsys.readouterr().err
     assert "differs in: n_sites" in err and len(err.strip().splitlines()) == 1
@@ -220,7 +220,7 @@ def test_real_sigint_to_the_command(tmp_path):
     vol = make_volume(64, 128, seed=3).image  # long enough (seconds) to interrupt mid-run
     np.save(tmp_path / "v.npy", vol)
     proc = subprocess.Popen([sys.executable, "-m", "ctseg.cli", "mesh", str(tmp_path / "v.npy"),
-                             "-o", str(tmp_path / "m.vtp"), "--jobs", "2", "--sites", "300"],
+                             "-o", str(tmp_path / "m.vtp"), "--mode", "slices", "--jobs", "2", "--sites", "300"],
                             stderr=subprocess.PIPE, text=True, start_new_session=True,
                             cwd=tmp_path,  # the installed ctseg, not a checkout's folder
                             # as from a terminal: a shell that runs this suite in the

@@ -238,7 +238,7 @@ def test_refused_outputs_and_options(tmp_path, capsys, monkeypatch, extra, words
 def test_surfaces_is_refused_in_slices_mode(tmp_path, capsys, monkeypatch):
     np.save(tmp_path / "in.npy", _vol())
     monkeypatch.chdir(tmp_path)
-    _refused(tmp_path, capsys, ["in.npy", "-o", "m.vtp", "--surfaces", "s.vtp"],
+    _refused(tmp_path, capsys, ["in.npy", "-o", "m.vtp", "--mode", "slices", "--surfaces", "s.vtp"],
              "--surfaces", "--mode 3d", "--boundary")
 
 
@@ -265,3 +265,37 @@ def test_levels_line_says_where_the_levels_came_from():
     assert line.startswith("levels (0-255): 16.6, 41.6, 71.9, 254.0 from the flat voxels")
     assert "41.6 shown only by the homogeneous tetrahedra" in line
     assert "homogeneous" not in _levels_line({"method": "tetrahedra"}, [20.0, 80.0])
+
+
+# ------------------------------------------------------------------- mode auto, the default
+def test_auto_mode_meshes_a_volume_in_3d_and_falls_back_to_slices(tmp_path, capsys, monkeypatch):
+    """Without --mode a volume becomes tetrahedra; where 3D mode would not fit in the memory
+    available but slices do, it goes slice by slice and says why, after the work."""
+    import ctseg.resources
+    from ctseg.volume import volume_mode
+
+    vol = _vol((4, 12, 12)).astype(np.float32)
+    np.save(tmp_path / "in.npy", vol)
+    assert main(["mesh", str(tmp_path / "in.npy"), "-o", str(tmp_path / "m.vtu"), "--sites", "30",
+                 "--report", str(tmp_path / "r.json"), "-q"]) == 0
+    assert json.loads((tmp_path / "r.json").read_text())["mode"] == "3d"
+    _, tets, _ = grid_to_arrays(read_unstructured_grid(tmp_path / "m.vtu"))
+    assert tets.shape[1] == 4
+    need_3d = vol.size * ctseg.resources.VOLUME_3D_BYTES_PER_VOXEL
+    monkeypatch.setattr(ctseg.resources, "available_bytes", lambda: need_3d - 1)
+    assert volume_mode(vol.shape)[0] == "slices" and volume_mode(vol.shape, "3d") == ("3d", "")
+    rc = main(["mesh", str(tmp_path / "in.npy"), "-o", str(tmp_path / "m.vtp"), "--sites", "30",
+               "--jobs", "1", "--report", str(tmp_path / "r2.json")])
+    err = capsys.readouterr().err
+    report = json.loads((tmp_path / "r2.json").read_text())
+    assert rc == 0 and report["n_slices"] == 4 and report["mode"] == "slices"
+    assert "mode auto: slices, 3D mode would need about" in err and "mode auto" in report["mode_note"]
+
+
+@pytest.mark.parametrize("shape,mode", [((12, 14), "slices"), ((1, 12, 14), "slices"),
+                                        ((6, 1, 14), "slices"), ((2, 2, 2), "3d")])
+def test_auto_mode_by_shape(shape, mode):
+    from ctseg.volume import volume_mode
+
+    assert volume_mode(shape) == (mode, "")
+    assert volume_mode(shape, "slices") == ("slices", "") and volume_mode(shape, "3d") == ("3d", "")

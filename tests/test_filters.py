@@ -271,6 +271,7 @@ def test_volume_slice_by_slice_with_known_truth(tmp_path, volume):
     from vtkmodules.util import numpy_support
 
     seg_filter = CTSegmentFilter()
+    seg_filter.SetMode("slices")
     seg_filter.SetNumberOfSites(350)
     reader = _vti_reader(tmp_path, volume.image)
     seg_filter.SetInputConnection(reader.GetOutputPort())
@@ -303,6 +304,7 @@ def test_volume_along_other_axes(axis, volume):
     covered by exactly one slice's mesh."""
     vol = volume.image[:, 20:60, 24:56]  # (8, 40, 32): slices differ in shape by axis
     f = CTSegmentFilter()
+    f.SetMode("slices")
     f.SetSliceAxis(axis)
     f.SetNumberOfSites(40)
     out = f.apply(array_to_image(vol, GEOM))
@@ -328,6 +330,7 @@ def test_same_bytes_from_every_executor(tmp_path, volume):
 
     def run(name, **kw):
         f = CTSegmentFilter()
+        f.SetMode("slices")
         f.SetNumberOfSites(80)
         f.SetNumberOfJobs(kw.get("n_jobs", 1))
         if "client" in kw:
@@ -350,14 +353,14 @@ def test_a_failing_slice_is_named():
 
     vol = np.random.default_rng(0).random((3, 12, 12))
     with pytest.raises(CTSegError, match="slice 0: n_sites"):
-        segment_volume(vol, n_sites=1000, n_jobs=1)
+        segment_volume(vol, mode="slices", n_sites=1000, n_jobs=1)
 
 
 def test_volume_keeps_the_per_pixel_maps_of_the_figure_slice_only():
     from ctseg.phantoms import make_phantom
     from ctseg.volume import segment_volume
     vol = np.stack([make_phantom(96, seed=0).image] * 3)
-    res = segment_volume(vol, n_sites=200, keep_maps=(1,))
+    res = segment_volume(vol, mode="slices", n_sites=200, keep_maps=(1,))
     kept = res.slices[1]
     assert kept.density is not None and kept.cvt_labels is not None
     # the slice holds steel and its streaks: it was corrected and keeps that image too

@@ -131,7 +131,8 @@ CTSegment = proxy(
     "CT slice or volume -> mesh with one material per element (Yang et al. 2014). Mode "
     "'slices': triangles, a volume slice by slice with one material numbering (output 1 "
     "the boundaries as polylines); Mode '3d': tetrahedra, a vtkUnstructuredGrid (output 1 "
-    "the interface triangles between materials).",
+    "the interface triangles between materials); Mode 'auto' (the default): 3D where the memory "
+    "allows it, else slices.",
     outputs=(("Mesh", 0), ("Boundaries", 1)))
 CTMetalStreaks = proxy(
     MetalStreakFilter, "CTMetalStreaks", "CT Metal Streaks",

@@ -55,6 +55,7 @@ def loaded(tmp_path_factory):
     logic = CTSegLogic(scene)
     params = logic.parameter_node()
     params.SetParameter("NumberOfSites", "350")
+    params.SetParameter("Mode", "slices")
     steps = []
     model, segmentation, result = logic.run(volume, params, progress=lambda f, m: steps.append(f))
     return dict(scene=scene, volume=volume, logic=logic, model=model,
@@ -142,7 +143,7 @@ def test_parameters_and_progress(loaded):
     # every spec parameter is in the node, under its VTK name, with the spec's default
     assert list(PARAMETERS) == [spec.vtk for spec in SPECS.values()]
     for name, spec in PARAMETERS.items():
-        if name != "NumberOfSites":
+        if name not in ("NumberOfSites", "Mode"):
             assert node.GetParameter(name) == parameter_text(spec, spec.default), name
     node.SetParameter("Lambda", "many")
     with pytest.raises(ValueError, match="Lambda"):
@@ -162,7 +163,8 @@ def test_a_node_without_image_is_refused(loaded):
 
 
 def test_a_single_slice_node(loaded):
-    """A volume node of one slice is a 2D problem; its segments cover that slice."""
+    """A volume node of one slice is a 2D problem under Mode 'auto', the default; its
+    segments cover that slice."""
     p = loaded["phantom"]
     img = array_to_image(p.image[2])
     node = slicer.vtkMRMLScalarVolumeNode()
@@ -170,7 +172,12 @@ def test_a_single_slice_node(loaded):
     node.SetSpacing(0.3, 0.3, 1.0)
     node.SetAndObserveImageData(img)
     loaded["scene"].AddNode(node)
-    model, segmentation, result = loaded["logic"].run(node)
+    params = loaded["logic"].parameter_node()
+    params.SetParameter("Mode", "auto")
+    try:
+        model, segmentation, result = loaded["logic"].run(node)
+    finally:
+        params.SetParameter("Mode", "slices")
     assert result.n_materials == 4 and model.GetPolyData().GetNumberOfCells() == len(result.triangles)
     assert segmentation.GetSegmentation().GetNumberOfSegments() == 4
 
@@ -231,7 +238,7 @@ def test_3d_mode_is_a_spec_parameter(loaded3d):
     from CTSegLib.logic import field_description
 
     assert PARAMETERS["Mode"].name == "mode"
-    assert field_description(PARAMETERS["Mode"])["items"] == ["slices", "3d"]
+    assert field_description(PARAMETERS["Mode"])["items"] == ["auto", "slices", "3d"]
     assert loaded3d["logic"].parameters().mode == "3d"
     res = loaded3d["result"]
     assert type(res).__name__ == "TetraSegmentation"

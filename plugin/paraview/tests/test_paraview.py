@@ -67,7 +67,7 @@ def _():
 
 @check("volume: composite filter, arrays, slices at their z, Dice per material")
 def _():
-    seg = CTSegment(Input=volume_reader)  # noqa: F821 - defined by LoadPlugin
+    seg = CTSegment(Input=volume_reader, Mode="slices")  # noqa: F821 - defined by LoadPlugin
     seg.NumberOfSites = 350
     seg.NumberOfJobs = 1
     seg.UpdatePipeline()
@@ -89,14 +89,14 @@ def _():
 def _():
     truth = phantom.truth.astype(np.int64)
     levels = [float(np.median(phantom.image[truth == k])) for k in range(4)]
-    seg = CTSegment(Input=volume_reader, NumberOfSites=350, NumberOfJobs=1,  # noqa: F821
+    seg = CTSegment(Input=volume_reader, Mode="slices", NumberOfSites=350, NumberOfJobs=1,  # noqa: F821
                     GrayLevels=", ".join(f"{v:.1f}" for v in levels))
     mesh = fetch(seg)
     dice = dice_per_label(labels_per_slice(mesh, GEOM, phantom.image.shape), truth, 4)
     print("    Dice per material with the true levels given:", np.round(dice, 3))
     assert min(dice) >= 0.75 and min(dice[0], dice[2], dice[3]) >= 0.93, dice
     # levels in the wrong units (outside the data's gray range): refused, output empty
-    bad = CTSegment(Input=volume_reader, NumberOfSites=350, NumberOfJobs=1,  # noqa: F821
+    bad = CTSegment(Input=volume_reader, Mode="slices", NumberOfSites=350, NumberOfJobs=1,  # noqa: F821
                     GrayLevels="1000000, 2000000")
     bad.UpdatePipeline()
     data = servermanager.Fetch(bad)
@@ -105,8 +105,8 @@ def _():
 
 @check("volume: two worker processes give the same mesh")
 def _():
-    one = CTSegment(Input=volume_reader, NumberOfSites=120, NumberOfJobs=1)  # noqa: F821
-    two = CTSegment(Input=volume_reader, NumberOfSites=120, NumberOfJobs=2)  # noqa: F821
+    one = CTSegment(Input=volume_reader, Mode="slices", NumberOfSites=120, NumberOfJobs=1)  # noqa: F821
+    two = CTSegment(Input=volume_reader, Mode="slices", NumberOfSites=120, NumberOfJobs=2)  # noqa: F821
     a, b = polydata_to_arrays(fetch(one)), polydata_to_arrays(fetch(two))
     assert np.array_equal(a[1], b[1]) and np.array_equal(a[2]["material"], b[2]["material"])
     assert np.allclose(a[0], b[0])
@@ -150,7 +150,7 @@ def _():
 @check("errors: a parameter the input cannot take leaves an empty output, not a wrong one")
 def _():
     too_many = phantom.image.shape[1] * phantom.image.shape[2] + 1  # sites per slice
-    seg = CTSegment(Input=volume_reader, NumberOfSites=too_many, NumberOfJobs=1)  # noqa: F821
+    seg = CTSegment(Input=volume_reader, Mode="slices", NumberOfSites=too_many, NumberOfJobs=1)  # noqa: F821
     seg.UpdatePipeline()
     data = servermanager.Fetch(seg)
     assert data is None or data.GetNumberOfCells() == 0
@@ -159,7 +159,7 @@ def _():
 if len(sys.argv) > 1:
     @check(f"screenshot {sys.argv[1]}")
     def _():
-        seg = CTSegment(Input=volume_reader, NumberOfSites=350)  # noqa: F821
+        seg = CTSegment(Input=volume_reader, Mode="slices", NumberOfSites=350)  # noqa: F821
         middle = Threshold(Input=seg, Scalars=["CELLS", "slice"], LowerThreshold=3,
                            UpperThreshold=3)
         view = CreateView("RenderView")

@@ -60,13 +60,13 @@ reader = write_vti(os.path.join(tmp, "part.vti"), part.image, GEOM)
 small = write_vti(os.path.join(tmp, "small.vti"), make_part_3d(24, seed=1, porosity=False).image, GEOM)
 
 
-@check("3d: Mode switches output 0 between vtkUnstructuredGrid (tetrahedra) and vtkPolyData")
+@check("3d: Mode (auto, the default, on a volume) switches output 0 between vtkUnstructuredGrid and vtkPolyData")
 def _():
     seg = CTSegment(Input=small, NumberOfSites=150, NumberOfJobs=1)  # noqa: F821 - LoadPlugin
-    assert seg.Mode == "slices"
+    assert seg.Mode == "auto"  # a volume that fits: 3D
     view = CreateView("RenderView")
     shown = Show(seg, view)
-    for mode, kind in (("3d", "vtkUnstructuredGrid"), ("slices", "vtkPolyData"),
+    for mode, kind in (("auto", "vtkUnstructuredGrid"), ("slices", "vtkPolyData"),
                        ("3d", "vtkUnstructuredGrid")):
         seg.Mode = mode
         seg.UpdatePipeline()
@@ -77,7 +77,7 @@ def _():
         Render(view)  # the view's representation follows the new output type
         drawn = shown.SMProxy.GetRepresentedDataInformation().GetNumberOfCells()
         # a surface representation draws the triangles, or the tetrahedra's outer faces
-        want = (len(face_graph(grid_to_arrays(out)[1])[2]) if mode == "3d"
+        want = (len(face_graph(grid_to_arrays(out)[1])[2]) if kind == "vtkUnstructuredGrid"
                 else out.GetNumberOfCells())
         assert drawn == want, (mode, drawn, want)
 

@@ -6,7 +6,7 @@ The Widget only gathers parameters into the parameter node and calls the Logic
 (``CTSegLib/logic.py``), which holds all the work and runs without the GUI. Its fields are
 made from the parameter spec (:mod:`ctseg.params`, through the Logic's
 ``field_description``): a spin box with the spec's range per number ("auto" at 0 where
-the value may come from the data), a combo box per choice (Mode: 'slices' or '3d'), a
+the value may come from the data), a combo box per choice (Mode: 'auto', 'slices' or '3d'), a
 check box per switch.
 """
 import ctk
@@ -35,7 +35,8 @@ class CTSeg(ScriptedLoadableModule):
             "slice; output a model coloured by material and a segmentation with one "
             "segment per material. Mode '3d': tetrahedra; output a model of the "
             "tetrahedra (cut in the slice views) and a segmentation whose segments are "
-            "ctseg's closed surfaces, one per material.")
+            "ctseg's closed surfaces, one per material. Mode 'auto' (the default): 3D "
+            "where the memory allows it, else slices.")
         parent.acknowledgementText = "ctseg is GPL-3.0-or-later."
 
 
@@ -156,6 +157,7 @@ class CTSegTest(ScriptedLoadableModuleTest):
         volume = slicer.util.addVolumeFromArray(p.image)
         logic = CTSegLogic(slicer.mrmlScene)
         logic.parameter_node().SetParameter("NumberOfSites", "350")
+        logic.parameter_node().SetParameter("Mode", "slices")
         model, segmentation, result = logic.run(volume)
         self.assertEqual(result.n_materials, 4)
         self.assertGreater(model.GetPolyData().GetNumberOfCells(), 0)

@@ -4,8 +4,9 @@ out, parameters kept in a parameter node.
 
 The parameter ``Mode`` chooses the mesh: 'slices' (triangles slice by slice; the segments
 are the mesh rasterised on the volume's voxels, closed surfaces made by Slicer's
-converter) or '3d' (tetrahedra; the segments are ctseg's own closed surfaces, one per
-material, kept as the segmentation's source representation).
+converter), '3d' (tetrahedra; the segments are ctseg's own closed surfaces, one per
+material, kept as the segmentation's source representation), or 'auto', the default (3D
+for a volume whose 3D mode fits in memory, else slices).
 
 Imports only MRML (``slicer``'s node classes) and ctseg, never qt, ctk or
 ``slicer.ScriptedLoadableModule``, so it runs in the full application and in PyPI's
@@ -174,7 +175,8 @@ class CTSegLogic:
         representation, closed surfaces by the registered converter); ``result`` is a
         SegmentedMesh or VolumeSegmentation.
 
-        Mode '3d': the model node holds the tetrahedra in RAS (a vtkUnstructuredGrid,
+        Mode '3d' (and 'auto', the default, on a volume whose 3D mode fits in memory:
+        :func:`ctseg.volume.volume_mode`): the model node holds the tetrahedra in RAS (a vtkUnstructuredGrid,
         cell arrays ``material`` and ``gray``; shown cut in the slice views); the
         segmentation node holds one segment per material whose source representation is
         ctseg's closed surface of that material, in RAS; ``result`` is a
@@ -202,7 +204,7 @@ class CTSegLogic:
         result = segment_array(arr, params, spacing=geom.spacing,
                                progress=lambda f, s: report(0.9 * f, s))
         report(0.9, "building the nodes")
-        if params.mode == "3d":
+        if hasattr(result, "tetrahedra"):  # mode '3d', or 'auto' on a volume that fits
             grid, _ = tetra_segmentation_to_vtk(result, geom)
             model = self._model_node(grid, f"{name} ctseg tetrahedra", result.n_materials)
             # the box of tetrahedra would hide everything in 3D: its cut shows in the slices
