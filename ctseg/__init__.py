@@ -1,4 +1,5 @@
-"""ctseg: segmented triangle meshes from X-ray CT images (Yang et al. 2014, and beyond).
+"""ctseg: segmented meshes from X-ray CT images, triangles from a slice and tetrahedra from a
+volume (Yang et al. 2014, and beyond).
 
 Each stage is a plain function on numpy arrays; :func:`segment_image` runs them all, with
 the parameters of :mod:`ctseg.params`. The VTK layer is :mod:`ctseg.filters`.

@@ -133,17 +133,17 @@ class Param:
 
     def to_number(self, value):
         """The value as a number (AUTO as :data:`AUTO_NUMBER`, a choice as its index)."""
+        if self.kind == "choice" and (value != AUTO or AUTO in self.choices):
+            return self.choices.index(value)  # 'auto' among the choices: its index, like the others
         if value == AUTO:
             return AUTO_NUMBER
-        if self.kind == "choice":
-            return self.choices.index(value)
         if self.kind == "bool":
             return int(value)
         return value
 
     def from_number(self, number):
         """Inverse of :meth:`to_number`, checked."""
-        if self.auto and number == AUTO_NUMBER:
+        if self.auto and number == AUTO_NUMBER and AUTO not in (self.choices or ()):
             return AUTO
         if self.kind == "choice":
             index = int(number)

@@ -12,8 +12,9 @@ from .errors import CTSegError, InputError, ParameterError, ResumeError
 from .params import SPECS, SegmentParams, resolve_name
 
 MESH_HELP = """\
-Segment a CT slice or volume into a triangle mesh with one material per triangle, or
-(--mode 3d) a volume into tetrahedra with one material each and closed surfaces.
+Segment a CT slice into a triangle mesh with one material per triangle, and a volume
+into tetrahedra with one material each and closed surfaces (--mode auto, the default,
+where the memory allows; else, or with --mode slices, slice by slice in triangles).
 
 Pipeline (Yang et al. 2014): gradient density map -> Ward-initialised centroidal Voronoi
 tessellation -> Delaunay triangles -> area-weighted gray per triangle -> recursive graph
@@ -21,11 +22,13 @@ cut -> materials numbered 0..K-1 by ascending gray.
 
 Inputs: .npy, .png, .tif/.tiff (single or multi-page), DICOM (a file, or a folder of one
 series; --series picks one of several), .nrrd/.nhdr, .nii/.nii.gz, .mha/.mhd, .vti, or a
-folder of TIFF slices. A volume is segmented slice by slice along --axis with one
-material numbering for the whole volume; its slices run in --jobs local processes or on
-a Dask cluster (--dask ADDRESS).
+folder of TIFF slices. Slices mode segments a volume slice by slice along --axis with
+one material numbering for the whole volume; its slices run in --jobs local processes or
+on a Dask cluster (--dask ADDRESS). Mode auto takes slices mode where 3D would not fit in
+memory and for the options only slices mode has (--boundary, --axis, --resume, --dask,
+a .mlp output), and says so.
 
-Outputs, by extension: .vtp (default; VTK XML PolyData, world coordinates, cell arrays
+Outputs of a slice and of slices mode, by extension: .vtp (default; VTK XML PolyData, world coordinates, cell arrays
 'material', 'gray' in the input's units, 'slice'), .vtu, .ply (material as face colour
 and quality), .stl (one file per material: NAME_material<k>.stl), .obj (one group per
 material, colours in NAME.mtl), .mlp (a MeshLab project with one layer per material,
@@ -33,7 +36,7 @@ each a coloured PLY NAME_material<k>.ply). Every mesh passes pymeshlab's checks 
 and every file is written under a temporary name and renamed: an error or Ctrl-C leaves
 no partial file.
 
-3D mode (--mode 3d, a volume only): the same method on the voxels, with the file's
+3D mode (a volume only): the same method on the voxels, with the file's
 spacing. Outputs: .vtu (tetrahedra with 'material' and 'gray'), .vtp (every material's
 closed surface, with 'material'), .stl (one closed STL per material), .ply and .obj (the
 closed surfaces coloured by material), and finite-element meshes .msh (Gmsh 4.1, physical
@@ -94,14 +97,19 @@ def _mesh(args):
 
     from .geometry import slice_axis, volume_slice
     from .metrics import evaluate, evaluate_volume
-    from .volume import segment_array, volume_mode
+    from .volume import segment_array, volume_mode, volume_slice_axis
 
     image, geom = read_image(args.input, series=args.series)
     image = _checked_input(np.asarray(image), args.input)
     params = args.params_obj
-    mode, mode_note = volume_mode(image.shape, params.mode)
-    if image.ndim == 3:
-        params = params.replace(mode=mode)  # decided once, on this machine's memory now
+    slices_for = [option for option, given in (
+        ("--resume", args.resume), ("--dask", args.dask), ("--boundary", args.boundary),
+        ("--axis", args.axis is not None or params.axis != SPECS["axis"].default),
+        (".mlp output", args.output.lower().endswith(".mlp"))) if given]
+    mode, mode_note = volume_mode(image.shape, params.mode, slices_for)
+    args.mode_note = mode_note
+    if image.ndim == 3:  # decided once, on this machine's memory now
+        params = params.replace(mode=mode, axis=volume_slice_axis(image.shape, params.axis))
     _check_outputs(args, mode)
     show = sys.stderr.isatty() and not args.quiet
     progress = _progress_printer(show)
@@ -325,23 +333,24 @@ def _print_params(args):
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="ctseg", description="Segmented triangle meshes from CT images.")
+    parser = argparse.ArgumentParser(prog="ctseg", description="Segmented meshes from CT images: triangles from "
+                                     "a slice, tetrahedra from a volume.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(dest="command", required=True)
-    m = sub.add_parser("mesh", help="segment a slice or a volume into a triangle mesh",
+    m = sub.add_parser("mesh", help="segment a slice or a volume into a mesh",
                        description=MESH_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     m.add_argument("input", help="image file or folder (see above)")
     m.add_argument("-o", "--output", required=True,
                    help="output mesh: .vtp, .vtu, .ply, .stl, .obj or .mlp (3D mode: .vtu, "
                         ".vtp, .stl, .ply, .obj, or FE: .msh, .inp, .xdmf)")
-    m.add_argument("--boundary", help="also write the material boundary polylines (.vtp)")
+    m.add_argument("--boundary", help="slices: also write the material boundary polylines (.vtp)")
     m.add_argument("--surfaces", help="3D mode: also write the interface triangles (.vtp)")
     _add_parameter_options(m)
     m.add_argument("--dask", metavar="ADDRESS",
-                   help="run a volume's slices on this Dask scheduler (e.g. tcp://host:8786)")
+                   help="slices mode: run a volume's slices on this Dask scheduler (e.g. tcp://host:8786)")
     m.add_argument("--resume", action="store_true",
-                   help="go on with a volume run that was interrupted or failed: the slices "
-                        "it finished (kept in OUTPUT.ctseg-partial) are not computed again")
+                   help="go on with a slices-mode volume run that was interrupted or failed: "
+                        "the slices it finished (kept in OUTPUT.ctseg-partial) are not computed again")
     m.add_argument("--series", metavar="UID",
                    help="DICOM SeriesInstanceUID, for a folder holding several series")
     m.add_argument("--report", help="write all diagnostics as JSON (with every parameter used)")
@@ -370,7 +379,8 @@ def main(argv=None):
         print(f"ctseg: error: {exc}{hint}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"ctseg: interrupted; no partial output was left{_resume_hint(args)}",
+        note = f" ({args.mode_note})" if getattr(args, "mode_note", "") else ""
+        print(f"ctseg: interrupted; no partial output was left{_resume_hint(args)}{note}",
               file=sys.stderr)
         return 130
     return 1

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._validate import as_volume
-from .errors import CTSegError, ParameterError
+from .errors import CTSegError, InputError, ParameterError
 from .geometry import slice_axis, volume_slice
 from .levels import LEVEL_SAMPLE_VOXELS, volume_levels
 from .params import AUTO, resolve
@@ -189,7 +189,10 @@ def segment_volume(volume, params=None, *, spacing=None, client=None, progress=N
     if "axis" in overrides and not isinstance(overrides["axis"], str):
         overrides["axis"] = "zyx"[slice_axis(overrides["axis"])]
     p = resolve(params, **overrides)
-    mode, mode_note = volume_mode(np.shape(volume), p.mode)
+    slices_for = [name for name, given in (("client", client is not None), ("keep_maps", bool(keep_maps)),
+                                          ("checkpoint", checkpoint is not None)) if given]
+    mode, mode_note = volume_mode(np.shape(volume), p.mode, slices_for)
+    p = p.replace(mode=mode, axis=volume_slice_axis(np.shape(volume), p.axis))  # as run: report, resume key
     if mode == "3d":
         shape = np.shape(volume)
         check_memory(int(np.prod(shape)) * VOLUME_3D_BYTES_PER_VOXEL,
@@ -306,26 +309,47 @@ def segment_array(array, params=None, *, spacing=None, progress=None, client=Non
     'SegmentedMesh'
     """
     arr = np.asarray(array)
-    if arr.ndim == 2 and volume_mode(arr.shape, resolve(params, **overrides).mode)[0] == "slices":
+    if arr.ndim == 2:
+        if resolve(params, **overrides).mode == "3d":
+            raise InputError(f"mode '3d': the input is a single {arr.shape[0]} x {arr.shape[1]} "
+                             "slice; 3D mode needs a volume (use mode 'auto' or 'slices' for a slice)")
         return segment_image(arr, params, progress=progress, **overrides)
     return segment_volume(arr, params, spacing=spacing, client=client, progress=progress,
                           keep_maps=keep_maps, checkpoint=checkpoint, **overrides)
 
 
-def volume_mode(shape, mode=AUTO):
+def volume_slice_axis(shape, axis):
+    """The slice axis ('z', 'y' or 'x') slices mode uses for a volume of ``shape``: ``axis``,
+    except that a volume 1 voxel thin is sliced across that axis (slices along another
+    would be 1 voxel wide).
+
+    Example
+    -------
+    >>> volume_slice_axis((40, 64, 64), "z"), volume_slice_axis((40, 1, 64), "z")
+    ('z', 'y')
+    """
+    if len(shape) == 3 and min(shape) == 1 and shape[slice_axis(axis)] > 1:
+        return "zyx"[list(shape).index(1)]
+    return axis
+
+
+def volume_mode(shape, mode=AUTO, slices_for=()):
     """How an input of ``shape`` is meshed: in 3D ('3d') or slice by slice ('slices').
 
     An explicit 'slices' or '3d' is kept (3D mode refuses an input thinner than 2 voxels
-    along any axis). 'auto' gives '3d' to a volume of at least 2 voxels along every axis
-    whose 3D mode fits in the memory available
-    (:data:`ctseg.resources.VOLUME_3D_BYTES_PER_VOXEL` per voxel), else 'slices'; a
-    (rows, cols) input is one slice.
+    along any axis). 'auto' gives 'slices' to a (rows, cols) input, to a volume 1 voxel
+    thin along an axis (sliced across that axis), and where an option only slices mode
+    has is given (``slices_for``: resuming, a Dask cluster, boundary polylines...); else
+    '3d' where the 3D mode fits in the memory available
+    (:data:`ctseg.resources.VOLUME_3D_BYTES_PER_VOXEL` per voxel), 'slices' where not.
 
     Parameters
     ----------
     shape : tuple of int
         The input's shape, (rows, cols) or (nz, ny, nx).
     mode : {'auto', 'slices', '3d'}
+    slices_for : sequence of str
+        The names of the given options that only slices mode has.
 
     Returns
     -------
@@ -337,6 +361,8 @@ def volume_mode(shape, mode=AUTO):
     -------
     >>> volume_mode((40, 64, 64)), volume_mode((1, 64, 64))[0], volume_mode((64, 64))[0]
     (('3d', ''), 'slices', 'slices')
+    >>> volume_mode((40, 64, 64), slices_for=["--resume"])
+    ('slices', "mode auto: slices, for --resume (slices mode's; mode 3d meshes the volume in 3D without it)")
     """
     shape = tuple(int(n) for n in shape)
     if mode != AUTO:
@@ -345,6 +371,9 @@ def volume_mode(shape, mode=AUTO):
         return "slices", ""
     if min(shape) < 2:  # a slice in a volume's clothes
         return "slices", ""
+    if slices_for:
+        return "slices", (f"mode auto: slices, for {', '.join(slices_for)} (slices mode's; "
+                          "mode 3d meshes the volume in 3D without it)")
     needed = int(np.prod(shape)) * VOLUME_3D_BYTES_PER_VOXEL
     fits, have = fits_in_memory(needed)
     if not fits:

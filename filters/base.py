@@ -177,7 +177,7 @@ class CTSegAlgorithm(VTKPythonAlgorithmBase):
         arr, geom = image_to_array(image)
         if arr.ndim != 2:
             raise InputError(f"image: {arr.shape[0]} slices; {type(self).__name__} takes one "
-                             "slice (CTSegmentFilter segments volumes slice by slice; "
+                             "slice (CTSegmentFilter segments volumes, in 3D or slice by slice; "
                              "vtkExtractVOI picks one slice)")
         return arr, geom, image
 

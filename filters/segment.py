@@ -18,16 +18,17 @@ from .convert3d import tetra_segmentation_to_vtk
 class CTSegmentFilter(CTSegAlgorithm):
     """Segment a vtkImageData into a mesh with one material per element (Yang et al.
     2014): :func:`ctseg.segment_image` for one slice, :func:`ctseg.volume.segment_volume`
-    for a volume, slice by slice or, with Mode '3d', in tetrahedra
-    (:func:`ctseg.pipeline3d.segment_volume_3d`, with the image's spacing).
+    for a volume, in tetrahedra (:func:`ctseg.pipeline3d.segment_volume_3d`, with the
+    image's spacing) or, with Mode 'slices', slice by slice.
 
     Slices mode: output 0 the triangle mesh (vtkPolyData) in world coordinates (the
     image's origin, spacing and direction) with cell arrays ``material`` (0..K-1, one
     numbering for the whole volume), ``gray`` (input units) and ``slice``; output 1 the
     material boundaries as polylines with ``material_a``, ``material_b`` and ``slice``.
 
-    Mode 'auto' (the default) meshes a volume in 3D where the memory allows it
-    (:func:`ctseg.volume.volume_mode`), else slice by slice, and a single slice in triangles.
+    Mode 'auto' (the default) meshes a volume in 3D where the memory allows it and no Dask
+    client is set (:func:`ctseg.volume.volume_mode`), else slice by slice, and a single
+    slice in triangles.
 
     3D mode: output 0 the tetrahedra (vtkUnstructuredGrid) in world coordinates with
     ``material`` and ``gray``; output 1 the interface triangles (vtkPolyData) with
@@ -71,9 +72,9 @@ class CTSegmentFilter(CTSegAlgorithm):
         if self.GetNumberOfInputConnections(0):
             self.GetInputAlgorithm(0, 0).UpdateInformation()
             ext = in_info[0].GetInformationObject(0).Get(vtkStreamingDemandDrivenPipeline.WHOLE_EXTENT())
-        dims = [ext[2 * a + 1] - ext[2 * a] + 1 for a in range(3)] if ext else [2, 2, 2]
+        dims = [ext[2 * a + 1] - ext[2 * a] + 1 for a in range(3)] if ext else [1, 1, 1]
         shape = tuple(dims[::-1]) if dims[2] > 1 else (dims[1], dims[0])
-        self._mode = "3d" if self.params.mode == "3d" else volume_mode(shape, self.params.mode)[0]
+        self._mode = volume_mode(shape, self.params.mode, ["DaskClient"] if self._client else [])[0]
         types = (vtkUnstructuredGrid if self._mode == "3d" else vtkPolyData, vtkPolyData)
         for port, cls in enumerate(types):
             info = out_info.GetInformationObject(port)

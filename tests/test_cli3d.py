@@ -299,3 +299,83 @@ def test_auto_mode_by_shape(shape, mode):
 
     assert volume_mode(shape) == (mode, "")
     assert volume_mode(shape, "slices") == ("slices", "") and volume_mode(shape, "3d") == ("3d", "")
+
+
+@pytest.mark.parametrize("extra,named", [(["--boundary", "b.vtp"], "--boundary"), (["--axis", "z"], "--axis"),
+                                         (["--set", "axis=y"], "--axis"), (["--resume"], "--resume"),
+                                         (["-o", "m.mlp"], ".mlp output")])
+def test_auto_mode_takes_slices_for_options_only_slices_mode_has(tmp_path, capsys, monkeypatch, extra, named):
+    """--boundary, --axis, --resume and a MeshLab project are slices mode's: under mode auto
+    they choose it (and say so), where --mode 3d refuses or ignores them."""
+    monkeypatch.chdir(tmp_path)
+    np.save("in.npy", _vol((4, 12, 12)).astype(np.float32))
+    out = [] if "-o" in extra else ["-o", "m.vtp"]
+    assert main(["mesh", "in.npy", "--sites", "30", "--jobs", "1", "--report", "r.json"] + out + extra) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["mode"] == "slices" and report["parameters"]["volume"]["mode"] == "slices"
+    assert f"for {named} (slices mode's" in report["mode_note"]
+    assert "mode auto: slices" in capsys.readouterr().err
+    assert not (tmp_path / "m.vtp.ctseg-partial").exists()
+
+
+def test_resume_after_auto_fell_back_to_slices(tmp_path, capsys, monkeypatch):
+    """An auto run that went slice by slice (3D mode did not fit) and was interrupted goes on
+    from its finished slices with --resume, even once 3D mode would fit."""
+    import ctseg.resources
+    import ctseg.volume
+
+    vol = make_volume(4, 40, seed=1).image
+    np.save(tmp_path / "v.npy", vol)
+    calls, real = [], ctseg.volume._segment_slice
+
+    def interrupted(*args):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*args)
+
+    cmd = ["mesh", str(tmp_path / "v.npy"), "-o", str(tmp_path / "m.vtp"), "--jobs", "1",
+           "--sites", "60", "--report", str(tmp_path / "r.json")]
+    enough = ctseg.resources.available_bytes
+    monkeypatch.setattr(ctseg.resources, "available_bytes",
+                        lambda: vol.size * ctseg.resources.VOLUME_3D_BYTES_PER_VOXEL - 1)
+    monkeypatch.setattr(ctseg.volume, "_segment_slice", interrupted)
+    assert main(cmd) == 130
+    err = capsys.readouterr().err
+    assert "2 finished slice(s)" in err and "mode auto: slices, 3D mode would need" in err
+    monkeypatch.setattr(ctseg.volume, "_segment_slice", real)
+    monkeypatch.setattr(ctseg.resources, "available_bytes", enough)
+    assert main(cmd + ["--resume", "-q"]) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["mode"] == "slices" and report["resumed_slices"] == 2
+    assert sorted(os.listdir(tmp_path)) == ["m.vtp", "r.json", "v.npy"]
+
+
+@pytest.mark.parametrize("thin", [0, 1, 2])
+@pytest.mark.parametrize("mode", ["auto", "slices"])
+def test_a_thin_volume_is_sliced_across_its_thin_axis(thin, mode):
+    """A volume 1 voxel thin along any axis is one slice across that axis, whatever slice
+    axis was asked for (slices along another would be 1 voxel wide)."""
+    from ctseg.volume import segment_array
+
+    vol = np.moveaxis(_vol((3, 12, 14))[:1], 0, thin)
+    vseg = segment_array(vol, mode=mode, axis="zyx"[(thin + 1) % 3], n_sites=30, n_jobs=1)
+    assert vseg.diagnostics["axis"] == "zyx"[thin] and len(vseg.slices) == 1
+    assert vseg.diagnostics["parameters"]["volume"]["axis"] == "zyx"[thin]
+    assert vseg.slices[0].diagnostics["image_shape"] == [n for n in vol.shape if n > 1]
+
+
+def test_command_slices_a_thin_volume_across_its_thin_axis(tmp_path):
+    np.save(tmp_path / "in.npy", _vol((3, 12, 14))[:, :1, :])
+    assert main(["mesh", str(tmp_path / "in.npy"), "-o", str(tmp_path / "m.vtp"), "--sites", "20",
+                 "--report", str(tmp_path / "r.json"), "-q"]) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["axis"] == "y" and report["n_slices"] == 1
+
+
+def test_mode_3d_refuses_a_single_slice_as_a_slice():
+    from ctseg.errors import InputError
+    from ctseg.volume import segment_array
+
+    with pytest.raises(InputError, match="single 12 x 12 slice; 3D mode needs a volume"):
+        segment_array(_vol((3, 12, 12))[0], mode="3d")
