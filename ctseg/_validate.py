@@ -19,7 +19,7 @@ def as_image(image, name="image", min_size=2):
     if arr.ndim != 2:
         raise InputError(
             f"{name}: expected a 2D array (rows, cols), got shape {arr.shape}; "
-            "process volumes slice by slice and convert colour images to one channel"
+            "mesh volumes with ctseg.segment_volume and convert colour images to one channel"
         )
     if arr.size == 0:
         raise InputError(f"{name}: the array is empty (shape {arr.shape})")

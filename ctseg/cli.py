@@ -25,8 +25,8 @@ series; --series picks one of several), .nrrd/.nhdr, .nii/.nii.gz, .mha/.mhd, .v
 folder of TIFF slices. Slices mode segments a volume slice by slice along --axis with
 one material numbering for the whole volume; its slices run in --jobs local processes or
 on a Dask cluster (--dask ADDRESS). Mode auto takes slices mode where 3D would not fit in
-memory and for the options only slices mode has (--boundary, --axis, --resume, --dask,
-a .mlp output), and says so.
+memory and for the options only slices mode has (--boundary, --dask, a .mlp output,
+--resume of a run that went slice by slice), and says so.
 
 Outputs of a slice and of slices mode, by extension: .vtp (default; VTK XML PolyData, world coordinates, cell arrays
 'material', 'gray' in the input's units, 'slice'), .vtu, .ply (material as face colour
@@ -102,15 +102,21 @@ def _mesh(args):
     image, geom = read_image(args.input, series=args.series)
     image = _checked_input(np.asarray(image), args.input)
     params = args.params_obj
+    # --resume counts where there is something to resume: a run that auto sent slice by slice
+    resumable = args.resume and os.path.isdir(checkpoint_folder(args.output))
     slices_for = [option for option, given in (
-        ("--resume", args.resume), ("--dask", args.dask), ("--boundary", args.boundary),
-        ("--axis", args.axis is not None or params.axis != SPECS["axis"].default),
+        ("--resume", resumable), ("--dask", args.dask), ("--boundary", args.boundary),
         (".mlp output", args.output.lower().endswith(".mlp"))) if given]
     mode, mode_note = volume_mode(image.shape, params.mode, slices_for)
     args.mode_note = mode_note
     if image.ndim == 3:  # decided once, on this machine's memory now
         params = params.replace(mode=mode, axis=volume_slice_axis(image.shape, params.axis))
-    _check_outputs(args, mode)
+    try:
+        _check_outputs(args, mode)
+    except CTSegError as exc:
+        if mode_note:  # an option of the other mode refused: say why this mode was chosen
+            raise type(exc)(f"{exc} ({mode_note})") from None
+        raise
     show = sys.stderr.isatty() and not args.quiet
     progress = _progress_printer(show)
     truth = _read_truth(args.truth, image.shape)

@@ -1,6 +1,7 @@
-"""3D volumes, slice by slice (SPEC 8): one gray map and one set of material levels for the
-whole volume, slices segmented in this process, in local worker processes or on a Dask
-cluster, with the same result whichever runs them."""
+"""3D volumes: the choice of mode ('auto', 'slices', '3d'; 3D itself is
+:mod:`ctseg.pipeline3d`) and slices mode (SPEC 8): one gray map and one set of material
+levels for the whole volume, slices segmented in this process, in local worker processes
+or on a Dask cluster, with the same result whichever runs them."""
 import os
 import time
 from dataclasses import dataclass, field
@@ -192,7 +193,8 @@ def segment_volume(volume, params=None, *, spacing=None, client=None, progress=N
     slices_for = [name for name, given in (("client", client is not None), ("keep_maps", bool(keep_maps)),
                                           ("checkpoint", checkpoint is not None)) if given]
     mode, mode_note = volume_mode(np.shape(volume), p.mode, slices_for)
-    p = p.replace(mode=mode, axis=volume_slice_axis(np.shape(volume), p.axis))  # as run: report, resume key
+    shape = np.shape(volume) if np.ndim(volume) != 2 else (1, *np.shape(volume))  # a slice: one slice
+    p = p.replace(mode=mode, axis=volume_slice_axis(shape, p.axis))  # as run: report, resume key
     if mode == "3d":
         shape = np.shape(volume)
         check_memory(int(np.prod(shape)) * VOLUME_3D_BYTES_PER_VOXEL,

@@ -301,21 +301,47 @@ def test_auto_mode_by_shape(shape, mode):
     assert volume_mode(shape, "slices") == ("slices", "") and volume_mode(shape, "3d") == ("3d", "")
 
 
-@pytest.mark.parametrize("extra,named", [(["--boundary", "b.vtp"], "--boundary"), (["--axis", "z"], "--axis"),
-                                         (["--set", "axis=y"], "--axis"), (["--resume"], "--resume"),
-                                         (["-o", "m.mlp"], ".mlp output")])
-def test_auto_mode_takes_slices_for_options_only_slices_mode_has(tmp_path, capsys, monkeypatch, extra, named):
-    """--boundary, --axis, --resume and a MeshLab project are slices mode's: under mode auto
-    they choose it (and say so), where --mode 3d refuses or ignores them."""
+@pytest.mark.parametrize("extra,named,output", [(["--boundary", "b.vtp"], "--boundary", "m.vtp"),
+                                                (["-o", "m.mlp"], ".mlp output", "m.mlp")])
+def test_auto_mode_takes_slices_for_options_only_slices_mode_has(tmp_path, capsys, monkeypatch, extra, named,
+                                                                 output):
+    """--boundary and a MeshLab project are slices mode's: under mode auto they choose it
+    (and say so), where --mode 3d refuses them."""
     monkeypatch.chdir(tmp_path)
     np.save("in.npy", _vol((4, 12, 12)).astype(np.float32))
-    out = [] if "-o" in extra else ["-o", "m.vtp"]
+    out = [] if "-o" in extra else ["-o", output]
     assert main(["mesh", "in.npy", "--sites", "30", "--jobs", "1", "--report", "r.json"] + out + extra) == 0
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["mode"] == "slices" and report["parameters"]["volume"]["mode"] == "slices"
     assert f"for {named} (slices mode's" in report["mode_note"]
     assert "mode auto: slices" in capsys.readouterr().err
-    assert not (tmp_path / "m.vtp.ctseg-partial").exists()
+    assert (tmp_path / output).is_file() and not (tmp_path / f"{output}.ctseg-partial").exists()
+
+
+@pytest.mark.parametrize("extra", [["--axis", "y"], ["--set", "axis=x"], ["--resume"]])
+def test_auto_mode_stays_3d_for_settings_3d_mode_ignores(tmp_path, capsys, monkeypatch, extra):
+    """A slice axis (like --jobs) and a --resume with nothing to resume leave auto in 3D."""
+    monkeypatch.chdir(tmp_path)
+    np.save("in.npy", _vol((4, 12, 12)).astype(np.float32))
+    assert main(["mesh", "in.npy", "--sites", "30", "-o", "m.vtu", "--report", "r.json", "-q"] + extra) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["mode"] == "3d" and "mode_note" not in report
+
+
+def test_auto_fallback_names_itself_when_it_refuses_a_3d_output(tmp_path, capsys, monkeypatch):
+    """Where auto went to slices (memory), a 3D-only output is refused with the reason."""
+    import ctseg.resources
+
+    vol = _vol((4, 12, 12)).astype(np.float32)
+    np.save(tmp_path / "in.npy", vol)
+    monkeypatch.setattr(ctseg.resources, "available_bytes",
+                        lambda: vol.size * ctseg.resources.VOLUME_3D_BYTES_PER_VOXEL - 1)
+    for extra in (["-o", str(tmp_path / "m.msh")],
+                  ["-o", str(tmp_path / "m.vtp"), "--surfaces", str(tmp_path / "s.vtp")]):
+        assert main(["mesh", str(tmp_path / "in.npy")] + extra) == 2
+        err = capsys.readouterr().err
+        assert "mode auto: slices, 3D mode would need about" in err and len(err.strip().splitlines()) == 1
+    assert os.listdir(tmp_path) == ["in.npy"]
 
 
 def test_resume_after_auto_fell_back_to_slices(tmp_path, capsys, monkeypatch):

@@ -272,3 +272,23 @@ def test_3d_parameters_reach_their_stage(small):
     none = DelaunayTetraFilter()
     none.SetSliverRounds(0)
     assert _field(none.apply(sites3d), "slivers_left")[0] >= _field(grid, "slivers_left")[0]
+
+
+def test_mode_auto_output_type_by_shape_and_dask_client(volume):
+    """Mode 'auto': tetrahedra (a grid) for a volume, triangles for a thin volume and for a
+    volume whose slices go to a Dask cluster (decided before any work is done)."""
+    from vtkmodules.vtkCommonExecutionModel import vtkTrivialProducer
+
+    def output_class(arr, client=None):
+        src = vtkTrivialProducer()
+        src.SetOutput(array_to_image(arr))
+        f = CTSegmentFilter()
+        f.SetInputConnection(src.GetOutputPort())
+        if client:
+            f.SetDaskClient(client)
+        f.UpdateDataObject()
+        return f.GetOutputDataObject(0).GetClassName()
+
+    assert output_class(volume) == "vtkUnstructuredGrid"
+    assert output_class(volume[:, :1, :]) == "vtkPolyData"
+    assert output_class(volume, client="tcp://127.0.0.1:1") == "vtkPolyData"
