@@ -192,11 +192,10 @@ def segment_volume(volume, params=None, *, spacing=None, client=None, progress=N
     p = resolve(params, **overrides)
     slices_for = [name for name, given in (("client", client is not None), ("keep_maps", bool(keep_maps)),
                                           ("checkpoint", checkpoint is not None)) if given]
-    mode, mode_note = volume_mode(np.shape(volume), p.mode, slices_for)
-    shape = np.shape(volume) if np.ndim(volume) != 2 else (1, *np.shape(volume))  # a slice: one slice
+    shape = np.shape(volume)
+    mode, mode_note = volume_mode(shape, p.mode, slices_for)
     p = p.replace(mode=mode, axis=volume_slice_axis(shape, p.axis))  # as run: report, resume key
     if mode == "3d":
-        shape = np.shape(volume)
         check_memory(int(np.prod(shape)) * VOLUME_3D_BYTES_PER_VOXEL,
                      f"meshing a {' x '.join(map(str, shape))} volume in 3D",
                      "crop or downsample it, or use slices mode")
@@ -323,14 +322,15 @@ def segment_array(array, params=None, *, spacing=None, progress=None, client=Non
 def volume_slice_axis(shape, axis):
     """The slice axis ('z', 'y' or 'x') slices mode uses for a volume of ``shape``: ``axis``,
     except that a volume 1 voxel thin is sliced across that axis (slices along another
-    would be 1 voxel wide).
+    would be 1 voxel wide); a (rows, cols) shape is one z slice.
 
     Example
     -------
     >>> volume_slice_axis((40, 64, 64), "z"), volume_slice_axis((40, 1, 64), "z")
     ('z', 'y')
     """
-    if len(shape) == 3 and min(shape) == 1 and shape[slice_axis(axis)] > 1:
+    shape = tuple(shape) if len(shape) == 3 else (1, *shape)
+    if min(shape) == 1 and shape[slice_axis(axis)] > 1:
         return "zyx"[list(shape).index(1)]
     return axis
 

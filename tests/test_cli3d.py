@@ -268,10 +268,17 @@ def test_levels_line_says_where_the_levels_came_from():
 
 
 # ------------------------------------------------------------------- mode auto, the default
+def _memory_for_slices_only(monkeypatch, vol):
+    """One byte less available than 3D mode needs for ``vol``."""
+    import ctseg.resources
+
+    monkeypatch.setattr(ctseg.resources, "available_bytes",
+                        lambda: vol.size * ctseg.resources.VOLUME_3D_BYTES_PER_VOXEL - 1)
+
+
 def test_auto_mode_meshes_a_volume_in_3d_and_falls_back_to_slices(tmp_path, capsys, monkeypatch):
     """Without --mode a volume becomes tetrahedra; where 3D mode would not fit in the memory
     available but slices do, it goes slice by slice and says why, after the work."""
-    import ctseg.resources
     from ctseg.volume import volume_mode
 
     vol = _vol((4, 12, 12)).astype(np.float32)
@@ -281,8 +288,7 @@ def test_auto_mode_meshes_a_volume_in_3d_and_falls_back_to_slices(tmp_path, caps
     assert json.loads((tmp_path / "r.json").read_text())["mode"] == "3d"
     _, tets, _ = grid_to_arrays(read_unstructured_grid(tmp_path / "m.vtu"))
     assert tets.shape[1] == 4
-    need_3d = vol.size * ctseg.resources.VOLUME_3D_BYTES_PER_VOXEL
-    monkeypatch.setattr(ctseg.resources, "available_bytes", lambda: need_3d - 1)
+    _memory_for_slices_only(monkeypatch, vol)
     assert volume_mode(vol.shape)[0] == "slices" and volume_mode(vol.shape, "3d") == ("3d", "")
     rc = main(["mesh", str(tmp_path / "in.npy"), "-o", str(tmp_path / "m.vtp"), "--sites", "30",
                "--jobs", "1", "--report", str(tmp_path / "r2.json")])
@@ -330,12 +336,9 @@ def test_auto_mode_stays_3d_for_settings_3d_mode_ignores(tmp_path, capsys, monke
 
 def test_auto_fallback_names_itself_when_it_refuses_a_3d_output(tmp_path, capsys, monkeypatch):
     """Where auto went to slices (memory), a 3D-only output is refused with the reason."""
-    import ctseg.resources
-
     vol = _vol((4, 12, 12)).astype(np.float32)
     np.save(tmp_path / "in.npy", vol)
-    monkeypatch.setattr(ctseg.resources, "available_bytes",
-                        lambda: vol.size * ctseg.resources.VOLUME_3D_BYTES_PER_VOXEL - 1)
+    _memory_for_slices_only(monkeypatch, vol)
     for extra in (["-o", str(tmp_path / "m.msh")],
                   ["-o", str(tmp_path / "m.vtp"), "--surfaces", str(tmp_path / "s.vtp")]):
         assert main(["mesh", str(tmp_path / "in.npy")] + extra) == 2
@@ -363,8 +366,7 @@ def test_resume_after_auto_fell_back_to_slices(tmp_path, capsys, monkeypatch):
     cmd = ["mesh", str(tmp_path / "v.npy"), "-o", str(tmp_path / "m.vtp"), "--jobs", "1",
            "--sites", "60", "--report", str(tmp_path / "r.json")]
     enough = ctseg.resources.available_bytes
-    monkeypatch.setattr(ctseg.resources, "available_bytes",
-                        lambda: vol.size * ctseg.resources.VOLUME_3D_BYTES_PER_VOXEL - 1)
+    _memory_for_slices_only(monkeypatch, vol)
     monkeypatch.setattr(ctseg.volume, "_segment_slice", interrupted)
     assert main(cmd) == 130
     err = capsys.readouterr().err
