@@ -84,6 +84,13 @@ many as hold the next value inwards)."""
 CLIP_MIN_VOXELS = 8
 """Voxels at an extreme value that must touch another one (a region, not noise hits)."""
 
+CLIP_REGION_SHARE = 0.25
+"""Share of the in-slice neighbours of the voxels at an extreme value that must be at it too
+for them to be a region (a material of its own). Noise clips a material's voxels
+independently, so this share is about the share of its voxels clipped: below it the
+material's level lies more than about 0.7 noise sd inside the range and is measured from
+its unclipped voxels (a uint16 scan whose air noise is cut at 0, say)."""
+
 
 TAIL_MIN_FRACTION = 0.01
 """A material beyond the outermost level: at least this share of the pixels lies further
@@ -211,9 +218,10 @@ def clipped_extremes(images):
 
     An extreme value (the minimum or the maximum) is clipped when it holds at least
     :data:`CLIP_MIN_FRACTION` of the voxels, at least twice as many as the next value
-    inwards does (a spike, not the tail of a distribution), and at least
-    :data:`CLIP_MIN_VOXELS` of its voxels touch another one within their slice (a region,
-    not single noise hits).
+    inwards does (a spike, not the tail of a distribution), at least
+    :data:`CLIP_MIN_VOXELS` of its voxels touch another one within their slice, and at
+    least :data:`CLIP_REGION_SHARE` of its voxels' in-slice neighbours are at it too (a
+    region, not noise hits scattered through a material whose level lies inside the range).
 
     Returns
     -------
@@ -240,14 +248,25 @@ def clipped_extremes(images):
             nxt = inner.max() if value == vmax else inner.min()
             ok = n >= 2 * int(np.sum(stack == nxt))
         if ok:
-            touch = np.zeros(at.shape, bool)
-            touch[:, 1:] |= at[:, :-1]
-            touch[:, :-1] |= at[:, 1:]
-            touch[:, :, 1:] |= at[:, :, :-1]
-            touch[:, :, :-1] |= at[:, :, 1:]
-            ok = int(np.sum(at & touch)) >= CLIP_MIN_VOXELS
+            ok = _region_share(at) >= CLIP_REGION_SHARE
         masks.append(at.reshape(v.shape) if ok else np.zeros(v.shape, bool))
     return masks[0], masks[1]
+
+
+def _region_share(at):
+    """Share of the in-slice neighbours of ``at``'s voxels (n, rows, cols) that are in
+    ``at`` too; 0 where fewer than :data:`CLIP_MIN_VOXELS` of them touch another one."""
+    touching = np.zeros(at.shape, np.int8)
+    neighbours = np.zeros(at.shape, np.int8)
+    for dst, src in (((slice(None), slice(1, None)), (slice(None), slice(None, -1))),
+                     ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+                     ((Ellipsis, slice(1, None)), (Ellipsis, slice(None, -1))),
+                     ((Ellipsis, slice(None, -1)), (Ellipsis, slice(1, None)))):
+        touching[dst] += at[src]
+        neighbours[dst] += 1
+    if int(np.sum(at & (touching > 0))) < CLIP_MIN_VOXELS:
+        return 0.0
+    return float(touching[at].sum()) / float(neighbours[at].sum())
 
 
 def level_sample(g255, sel=None, n_max=20000):

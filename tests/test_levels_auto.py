@@ -186,3 +186,36 @@ def test_a_volume_s_low_gradient_voxels_see_the_3d_gradient():
     report = {}
     per_slice, _ = material_levels(vol, scale, report=report)  # volume=False
     assert report["method"] == "low_gradient" and len(per_slice) == 3
+
+
+def _ball_with_air_cut_at_zero(n=40, seed=0):
+    """A uint16 ball in air whose air noise (sd 800 about 1000) is cut at 0: about 10% of the
+    air voxels read 0, scattered, not a region."""
+    z, y, x = np.indices((n, n, n))
+    truth = (((z - n / 2) ** 2 + (y - n / 2) ** 2 + (x - n / 2) ** 2) < (0.3 * n) ** 2).astype(int)
+    noise = np.random.default_rng(seed).normal(0, 800, truth.shape)
+    return (1000 + 20000 * truth + noise).clip(0, 65535).astype(np.uint16), truth
+
+
+def test_noise_cut_at_the_dtype_limit_is_not_a_material():
+    """Noise hits at 0 scattered through the air are its tail, not clipped data: no level of
+    their own (before: a level at 0 beside the air's, and given 2 materials, the air's tail
+    took one of them and the ball's partial volume went to the other). A saturated region
+    at the same share of the voxels still is one."""
+    vol, truth = _ball_with_air_cut_at_zero()
+    assert 0.05 < (vol == 0).mean() < 0.15
+    low, high = clipped_extremes(vol)
+    assert not low.any() and not high.any()
+    saturated = vol.copy()
+    saturated[(vol == 0) | (truth == 1)] = 0  # the same voxels at 0 and the ball: a region
+    assert clipped_extremes(saturated)[0].sum() == (saturated == 0).sum()
+    scale = ctseg.intensity.gray_scale(vol)
+    auto, _ = material_levels(vol, scale)
+    given, _ = material_levels(vol, scale, n_materials=2)
+    air_255, ball_255 = (np.array([1000.0, 21000.0]) - scale[0]) * scale[1]
+    assert len(auto) == 2
+    for levels in (auto, given):
+        assert abs(levels[0] - air_255) < 2.0 and abs(levels[1] - ball_255) < 3.0
+    seg = ctseg.segment_volume(vol, n_materials=2, mode="3d")
+    assert seg.n_materials == 2
+    assert ctseg.metrics.evaluate_tetra(seg, truth)["min_dice"] > 0.93
