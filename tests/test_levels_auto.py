@@ -200,8 +200,8 @@ def _ball_with_air_cut_at_zero(n=40, seed=0):
 def test_noise_cut_at_the_dtype_limit_is_not_a_material():
     """Noise hits at 0 scattered through the air are its tail, not clipped data: no level of
     their own (before: a level at 0 beside the air's, and given 2 materials, the air's tail
-    took one of them and the ball's partial volume went to the other). A saturated region
-    at the same share of the voxels still is one."""
+    took one of them and the ball's partial volume went to the other). The same volume with
+    the whole ball at 0 too (a region) is clipped data."""
     vol, truth = _ball_with_air_cut_at_zero()
     assert 0.05 < (vol == 0).mean() < 0.15
     low, high = clipped_extremes(vol)
