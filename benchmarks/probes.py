@@ -67,8 +67,7 @@ def cases():
     yield "2 slices thin", thin + rng.normal(0, 5, thin.shape), truth_thin, None, False, ""
     yield "constant", np.full((20, 20, 20), 7.0), np.zeros((20, 20, 20), int), None, False, ""
     img, truth = _tube()
-    yield ("upright tube (faces parallel to the slices)", img, truth, None, True,
-           "slices mode: the slices beyond the end faces make a third level")
+    yield "upright tube (faces parallel to the slices)", img, truth, None, True, ""
     z, y, x = np.indices(img.shape)
     fov = (y - 31.5) ** 2 + (x - 31.5) ** 2 < 31 ** 2
     yield ("upright tube, outside the field of view 0", np.where(fov, img, 0.0).clip(0, None),

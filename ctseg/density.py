@@ -1,4 +1,5 @@
-"""Stage 1: the gradient density map that steers the CVT (paper 5.1, SPEC 1; in 3D SPEC 9.1)."""
+"""Stage 1: the gradient density map that steers the CVT (paper 5.1, SPEC 1; in 3D SPEC 9.1),
+and the flat pixels and voxels (away from edges) that measure the material levels."""
 import numpy as np
 from scipy import ndimage
 
@@ -179,3 +180,112 @@ def density_volume(volume, spacing=(1.0, 1.0, 1.0), density_sigma_px=DEFAULTS.de
     mag = np.sqrt(gx * gx + gy * gy + gz * gz)
     size = tuple(2 * int(np.ceil(max(s, 0.5))) + 1 for s in sigma_zyx)
     return _rho_from_gradient(mag, floor, saturation, ridge, size)
+
+
+def flat_pixels(image, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAULTS.density_floor,
+                density_saturation=DEFAULTS.density_saturation):
+    """Pixels away from material edges: the un-sharpened density below half its range.
+
+    These pixels measure the material gray levels (:func:`ctseg.levels.material_levels`);
+    the ridge sharpening of the density is left out because it thins the edge bands.
+
+    Parameters
+    ----------
+    image : (rows, cols) array_like
+    flat_sigma_px : float
+        Smoothing of the gradient (as ``density_sigma_px`` in :func:`density_map`).
+    density_floor, density_saturation
+        As in :func:`density_map`.
+
+    Returns
+    -------
+    flat : (rows, cols) bool ndarray
+
+    Example
+    -------
+    >>> img = np.zeros((20, 20)); img[:, 10:] = 1.0
+    >>> flat = flat_pixels(img)
+    >>> bool(flat[:, 0].all()), bool(flat[:, 9:11].any())
+    (True, False)
+    """
+    strength = density_map(image, density_sigma_px=flat_sigma_px, density_floor=density_floor,
+                           density_saturation=density_saturation, density_ridge=0.0)
+    return (strength - density_floor) < 0.5
+
+
+def _slice_gradient_scale(smooth, saturation):
+    """The in-plane gradient magnitude of one smoothed slice and the (noise, full density)
+    gradients :func:`density_map` normalises it with, in the slice's own units."""
+    gy, gx = np.gradient(smooth)
+    mag = np.hypot(gx, gy)
+    peak = float(mag.max())
+    if peak == 0.0:
+        return mag, 0.0, np.inf
+    if saturation == AUTO:
+        g_noise = 2.0 * float(np.median(mag))
+        return mag, g_noise, max(10.0 * g_noise, 0.02 * peak)
+    return mag, 0.0, saturation * peak
+
+
+def flat_voxels(stack, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAULTS.density_floor,
+                density_saturation=DEFAULTS.density_saturation, across=True):
+    """Voxels of a stack of slices away from material edges: :func:`flat_pixels` in each
+    slice and, with ``across``, away from ramps across the slices.
+
+    A voxel of an interior slice k is on a ramp when its gray lies between those of the
+    same pixel in slices k - 1 and k + 1 (both steps of one sign, each slice smoothed in
+    plane by ``flat_sigma_px``) and the smaller step, less slice k's noise gradient, is at
+    least half of slice k's full-density gradient (the in-plane rule of
+    :func:`density_map`, applied to the steps along z). Such a voxel is partial volume
+    between slices: a face parallel to the slices, blurred across two or three of them,
+    looks flat in every slice yet has an intermediate gray. A sharp step (independently
+    reconstructed slices, or a face on a slice boundary) has one small step and stays flat,
+    and so do the first and last slices.
+
+    Parameters
+    ----------
+    stack : (nz, rows, cols) array_like
+        Consecutive slices.
+    flat_sigma_px, density_floor, density_saturation
+        As in :func:`flat_pixels`.
+    across : bool, optional
+        Also leave out the ramp voxels across the slices.
+
+    Returns
+    -------
+    flat : (nz, rows, cols) bool ndarray
+
+    Example
+    -------
+    >>> vol = np.zeros((6, 32, 32)); vol[4:, 8:24, 8:24] = 1.0
+    >>> vol[3, 8:24, 8:24] = 0.5   # the block's lower face, blurred across slice 3
+    >>> flat_voxels(vol)[:, 16, 16].tolist()
+    [True, True, True, False, True, True]
+    >>> flat_voxels(vol, across=False)[:, 16, 16].tolist()
+    [True, True, True, True, True, True]
+    """
+    vol = np.asarray(stack, dtype=np.float64)
+    sigma = check("flat_sigma_px", flat_sigma_px)
+    floor = check("density_floor", density_floor)
+    saturation = check("density_saturation", density_saturation)
+    if vol.ndim != 3:
+        raise InputError(f"stack: expected a 3D array (nz, rows, cols), got shape {vol.shape}")
+    span = float(vol.max() - vol.min()) if vol.size else 0.0
+    if span == 0.0:
+        return np.ones(vol.shape, bool)
+    vol = (vol - vol.min()) / span  # common units, so that huge ranges cannot overflow
+    smooth = ndimage.gaussian_filter(vol, (0, sigma, sigma), mode="nearest") if sigma > 0 else vol
+    flat = np.empty(vol.shape, bool)
+    noise, full = np.empty(len(vol)), np.empty(len(vol))
+    for k, sl in enumerate(smooth):
+        mag, noise[k], full[k] = _slice_gradient_scale(sl, saturation)
+        # the in-plane rule exactly as flat_pixels states it: strength below half
+        flat[k] = (floor + np.clip((mag - noise[k]) / (full[k] - noise[k]), 0.0, 1.0) - floor) < 0.5
+    if not across or len(vol) < 3:
+        return flat
+    up, down = smooth[2:] - smooth[1:-1], smooth[1:-1] - smooth[:-2]
+    step = np.minimum(np.abs(up), np.abs(down))
+    noise_k, full_k = noise[1:-1, None, None], full[1:-1, None, None]
+    ramp = (np.sign(up) == np.sign(down)) & (up != 0) & (step - noise_k >= 0.5 * (full_k - noise_k))
+    flat[1:-1] &= ~ramp
+    return flat

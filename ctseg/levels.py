@@ -5,7 +5,7 @@ from scipy.ndimage import gaussian_filter1d, uniform_filter
 
 from ._reduce import weighted_variance
 from ._validate import as_image
-from .density import density_map
+from .density import density_map, flat_pixels, flat_voxels  # noqa: F401  (flat_pixels: re-exported)
 from .geometry import slice_axis, volume_slice
 from .intensity import gray_scale, rescale_gray
 from .levels_auto import (FLAT_TRUST_FRACTION, clipped_extremes, level_report, level_sample,
@@ -195,37 +195,6 @@ def pixel_material_levels(image255, flat, merge_k=DEFAULTS.merge_k,
     return levels, sigma
 
 
-def flat_pixels(image, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAULTS.density_floor,
-                density_saturation=DEFAULTS.density_saturation):
-    """Pixels away from material edges: the un-sharpened density below half its range.
-
-    These pixels measure the material gray levels (:func:`material_levels`); the ridge
-    sharpening of the density is left out because it thins the edge bands.
-
-    Parameters
-    ----------
-    image : (rows, cols) array_like
-    flat_sigma_px : float
-        Smoothing of the gradient (as ``density_sigma_px`` in :func:`ctseg.density_map`).
-    density_floor, density_saturation
-        As in :func:`ctseg.density_map`.
-
-    Returns
-    -------
-    flat : (rows, cols) bool ndarray
-
-    Example
-    -------
-    >>> img = np.zeros((20, 20)); img[:, 10:] = 1.0
-    >>> flat = flat_pixels(img)
-    >>> bool(flat[:, 0].all()), bool(flat[:, 9:11].any())
-    (True, False)
-    """
-    strength = density_map(image, density_sigma_px=flat_sigma_px, density_floor=density_floor,
-                           density_saturation=density_saturation, density_ridge=0.0)
-    return (strength - density_floor) < 0.5
-
-
 def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
                     flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAULTS.density_floor,
                     density_saturation=DEFAULTS.density_saturation, merge_k=DEFAULTS.merge_k,
@@ -239,7 +208,9 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
     The modes of the histogram of the pixels away from edges
     (:func:`pixel_material_levels` on :func:`flat_pixels`). Given a stack, the pixels of
     all its slices count together, so every slice of a volume is labelled against the
-    same levels and material numbers agree across slices.
+    same levels and material numbers agree across slices; with ``volume`` the voxels on a
+    ramp across the slices (a face parallel to them) are not flat either
+    (:func:`ctseg.density.flat_voxels`).
 
     Two rules beyond that (neither changes a scan whose flat pixels can be trusted and
     whose data are not clipped):
@@ -302,8 +273,7 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
     stack = np.asarray(images)
     stack = stack[None] if stack.ndim == 2 else stack
     g255 = np.stack([rescale_gray(sl, scale=scale)[0] for sl in stack])
-    flat = np.stack([flat_pixels(sl, flat_sigma_px, density_floor, density_saturation)
-                     for sl in stack])
+    flat = flat_voxels(stack, flat_sigma_px, density_floor, density_saturation, across=volume)
     kw = dict(merge_k=merge_k, merge_rel=merge_rel, merge_floor_255=merge_floor_255,
               merge_threshold_255=merge_threshold_255, level_min_fraction=level_min_fraction)
     if check("gray_levels", gray_levels) != AUTO:
