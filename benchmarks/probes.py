@@ -19,7 +19,7 @@ from scipy.ndimage import gaussian_filter
 from accuracy import write_results  # benchmarks/ is this script's folder
 
 import ctseg
-from ctseg.metrics import dice_per_label
+from ctseg.metrics import matched_dice_per_label
 from ctseg.raster import tetra_label_volume
 
 N = 48
@@ -77,22 +77,13 @@ def cases():
            "the rod's 31 flat voxels and 0.6% of the voxels are too few for a level")
 
 
-def matched_dice(pred, truth):
-    """Dice of each true label after mapping each found label to the true one it overlaps
-    most."""
-    n_true = int(truth.max()) + 1
-    to_true = np.array([np.bincount(truth[pred == k], minlength=n_true).argmax()
-                        if (pred == k).any() else 0 for k in range(int(pred.max()) + 1)])
-    return dice_per_label(to_true[pred], truth, n_true)
-
-
 def run(name, vol, truth, spacing, slices_too, known):
     t0 = time.perf_counter()
     seg = ctseg.segment_volume(vol, spacing=spacing)
     wall = time.perf_counter() - t0
     pred = tetra_label_volume(seg.points, seg.tetrahedra, seg.material, seg.shape, seg.spacing)
     row = {"case": name, "n_true": int(truth.max()) + 1, "n_found": int(seg.n_materials),
-           "kind": type(seg).__name__, "dice": [float(d) for d in matched_dice(pred, truth)],
+           "kind": type(seg).__name__, "dice": [float(d) for d in matched_dice_per_label(pred, truth)],
            "wall_s": wall, "known": known}
     if slices_too:
         row["n_found_slices"] = len(ctseg.segment_volume(vol, mode="slices", spacing=spacing).material_gray)

@@ -21,6 +21,35 @@ def dice_per_label(pred, truth, n_labels=None):
     return out
 
 
+def matched_dice_per_label(pred, truth):
+    """Dice of each true label after mapping every found label to the true label it
+    overlaps most, so that a false extra material (an artefact split off a true one) costs
+    only the voxels it holds, whatever its gray.
+
+    Parameters
+    ----------
+    pred, truth : int array_like of one shape
+        Found and true labels, each >= 0.
+
+    Returns
+    -------
+    dice : (truth.max() + 1,) float ndarray
+        As :func:`dice_per_label` of the mapped labels.
+
+    Example
+    -------
+    >>> truth = np.array([0, 0, 0, 1, 1, 1])
+    >>> pred = np.array([0, 2, 0, 1, 1, 0])   # label 2 is a false material inside 0
+    >>> np.round(matched_dice_per_label(pred, truth), 3).tolist()
+    [0.857, 0.8]
+    """
+    pred, truth = np.asarray(pred).ravel(), np.asarray(truth).ravel()
+    n_true = int(truth.max()) + 1
+    counts = np.zeros((int(pred.max()) + 1, n_true), np.int64)
+    np.add.at(counts, (pred, truth), 1)
+    return dice_per_label(counts.argmax(axis=1)[pred], truth, n_true)
+
+
 def truth_boundary_points(truth, supersample=1):
     """Points (x, y) in pixel units midway between neighbouring truth cells of different label."""
     lab = np.asarray(truth)

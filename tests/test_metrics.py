@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from ctseg.metrics import dice_per_label, evaluate_volume
+from ctseg.metrics import dice_per_label, evaluate_volume, matched_dice_per_label
 from ctseg.raster import label_image, subpixel_label_image, volume_labels
 
 
@@ -91,3 +91,17 @@ def test_metrics_does_not_import_volume():
     names = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
     names |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     assert not any(name and name.split(".")[-1] == "volume" for name in names)
+
+
+def test_matched_dice_maps_each_found_label_by_overlap_against_brute_force():
+    rng = np.random.default_rng(3)
+    truth = rng.integers(0, 3, 400)
+    # found labels: the truth with 10% noise and two false labels split off 0 and 2
+    pred = np.where(rng.random(400) < 0.1, rng.integers(0, 3, 400), truth)
+    pred[(truth == 0) & (rng.random(400) < 0.3)] = 3
+    pred[(truth == 2) & (rng.random(400) < 0.2)] = 4
+    # brute force: for every found label, the true label with the most common voxels
+    to_true = [max(range(3), key=lambda t: np.sum((pred == k) & (truth == t))) for k in range(5)]
+    expected = [2 * np.sum((np.take(to_true, pred) == t) & (truth == t))
+                / (np.sum(np.take(to_true, pred) == t) + np.sum(truth == t)) for t in range(3)]
+    assert np.allclose(matched_dice_per_label(pred, truth), expected)
