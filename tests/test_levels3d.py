@@ -3,9 +3,10 @@ small true 3D phantom the flat voxels hold partial volume and merge materials; t
 tetrahedra's grays recover them."""
 import numpy as np
 import pytest
+from scipy.ndimage import gaussian_filter
 
 import ctseg.levels3d
-from ctseg.levels3d import checked_levels, homogeneous_levels, hidden_levels, tetra_levels
+from ctseg.levels3d import checked_levels, denser_levels, homogeneous_levels, hidden_levels, tetra_levels
 from ctseg.metrics import evaluate_tetra
 from ctseg.params import SegmentParams
 from ctseg.phantoms import make_volume
@@ -140,3 +141,35 @@ def test_a_handful_of_homogeneous_tetrahedra_is_no_level():
     assert len(found) == 2
     found, _ = homogeneous_levels(gray, vol, spread, 5.0)  # 60 of them: 0.8%
     assert len(found) == 3
+
+
+def test_denser_levels_only_above_the_highest_and_beyond_the_separation():
+    p = SegmentParams()
+    sep = max(p.merge_floor_255, p.merge_k * 1.0) + p.merge_rel * 200.0
+    assert denser_levels([20.0, 90.0, 200.0], 1.0, [20.0, 90.0]).tolist() == [200.0]
+    # within the separation of the highest level: its own blur tail, nothing added
+    assert denser_levels([20.0, 180.0 + 0.9 * sep], 1.0, [20.0, 180.0]).size == 0
+    # below the lowest level: never (a dark artefact band would make one)
+    assert denser_levels([2.0, 90.0], 1.0, [40.0, 90.0]).size == 0
+
+
+def _rod_in_cylinder(n=48):
+    """A solid aluminium cylinder holding a steel rod of radius 3 voxels (0.5% of the
+    voxels): too few flat voxels for a level of the rod's own."""
+    z, y, x = np.indices((n, n, n))
+    truth = (((y - n / 2) ** 2 + (x - n / 2 + 2) ** 2 < 11 ** 2) & (z > 6) & (z < n - 6)).astype(int)
+    truth[((y - n / 2) ** 2 + (x - n / 2 - 2) ** 2 < 9) & (z > 9) & (z < n - 10)] = 2
+    gray = gaussian_filter(np.array([1000.0, 9000.0, 30000.0])[truth], 0.8)
+    return gray + np.random.default_rng(1).normal(0, 400, truth.shape), truth
+
+
+def test_a_small_dense_insert_gets_a_level_from_its_tetrahedra(monkeypatch):
+    vol, truth = _rod_in_cylinder()
+    assert (truth == 2).mean() < 0.01
+    seg = segment_volume_3d(vol)
+    assert seg.n_materials == 3
+    assert seg.diagnostics["levels"]["denser_added_255"]
+    dice = evaluate_tetra(seg, truth)["dice"]
+    assert min(dice) > 0.85
+    monkeypatch.setattr(ctseg.levels3d, "denser_levels", lambda *a, **k: np.zeros(0))
+    assert segment_volume_3d(vol).n_materials == 2
