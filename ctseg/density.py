@@ -93,19 +93,25 @@ def density_map(image, density_sigma_px=DEFAULTS.density_sigma_px,
 def _rho_from_gradient(mag, floor, saturation, ridge, size):
     """The normalisation and ridge sharpening shared by the 2D and 3D maps: rho from the
     gradient magnitude ``mag``; ``size`` is the ridge window (an int or one per axis)."""
-    peak = mag.max()
-    if peak == 0.0:
+    if mag.max() == 0.0:
         return np.full(mag.shape, floor)
-    if saturation == AUTO:
-        g_noise = 2.0 * float(np.median(mag))
-        g_ref = max(10.0 * g_noise, 0.02 * peak)
-    else:
-        g_noise, g_ref = 0.0, saturation * peak
+    g_noise, g_ref = _gradient_scale(mag, saturation)
     strength = np.clip((mag - g_noise) / (g_ref - g_noise), 0.0, 1.0)
     if ridge:
         local = ndimage.maximum_filter(mag, size=size, mode="nearest")
         strength = strength * (mag / np.maximum(local, 1e-300)) ** ridge
     return floor + strength
+
+
+def _gradient_scale(mag, saturation):
+    """(g_noise, g_ref) of a gradient magnitude map with a nonzero maximum: the noise
+    gradient subtracted and the gradient that gets the full density (see
+    :func:`density_map`)."""
+    peak = float(mag.max())
+    if saturation == AUTO:
+        g_noise = 2.0 * float(np.median(mag))
+        return g_noise, max(10.0 * g_noise, 0.02 * peak)
+    return 0.0, saturation * peak
 
 
 def density_volume(volume, spacing=(1.0, 1.0, 1.0), density_sigma_px=DEFAULTS.density_sigma_px,
@@ -218,13 +224,9 @@ def _slice_gradient_scale(smooth, saturation):
     gradients :func:`density_map` normalises it with, in the slice's own units."""
     gy, gx = np.gradient(smooth)
     mag = np.hypot(gx, gy)
-    peak = float(mag.max())
-    if peak == 0.0:
+    if mag.max() == 0.0:
         return mag, 0.0, np.inf
-    if saturation == AUTO:
-        g_noise = 2.0 * float(np.median(mag))
-        return mag, g_noise, max(10.0 * g_noise, 0.02 * peak)
-    return mag, 0.0, saturation * peak
+    return (mag, *_gradient_scale(mag, saturation))
 
 
 def flat_voxels(stack, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAULTS.density_floor,
