@@ -219,14 +219,15 @@ def flat_pixels(image, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAU
     return (strength - density_floor) < 0.5
 
 
-def _slice_gradient_scale(smooth, saturation):
-    """The in-plane gradient magnitude of one smoothed slice and the (noise, full density)
-    gradients :func:`density_map` normalises it with, in the slice's own units."""
+def _flat_and_scale(smooth, floor, saturation):
+    """One smoothed slice's flat pixels (:func:`flat_pixels`' rule) and the (noise, full
+    density) gradients :func:`density_map` normalises its gradient with."""
     gy, gx = np.gradient(smooth)
     mag = np.hypot(gx, gy)
+    flat = (_rho_from_gradient(mag, floor, saturation, 0.0, 1) - floor) < 0.5
     if mag.max() == 0.0:
-        return mag, 0.0, np.inf
-    return (mag, *_gradient_scale(mag, saturation))
+        return flat, 0.0, np.inf
+    return (flat, *_gradient_scale(mag, saturation))
 
 
 def flat_voxels(stack, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAULTS.density_floor,
@@ -280,9 +281,7 @@ def flat_voxels(stack, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAU
     flat = np.empty(vol.shape, bool)
     noise, full = np.empty(len(vol)), np.empty(len(vol))
     for k, sl in enumerate(smooth):
-        mag, noise[k], full[k] = _slice_gradient_scale(sl, saturation)
-        # the in-plane rule exactly as flat_pixels states it: strength below half
-        flat[k] = (floor + np.clip((mag - noise[k]) / (full[k] - noise[k]), 0.0, 1.0) - floor) < 0.5
+        flat[k], noise[k], full[k] = _flat_and_scale(sl, floor, saturation)
     if not across or len(vol) < 3:
         return flat
     up, down = smooth[2:] - smooth[1:-1], smooth[1:-1] - smooth[:-2]

@@ -241,6 +241,4 @@ def checked_levels(levels_255, flat_sigma_255, gray_255, volume, params=None, sp
         levels_255 = np.sort(np.concatenate([levels_255, added]))
     denser = denser_levels(t_levels, t_sigma, levels_255, p)
     report["denser_added_255"] = [float(v) for v in denser]
-    if len(denser):
-        levels_255 = np.concatenate([levels_255, denser])
-    return levels_255, report
+    return np.concatenate([levels_255, denser]), report
