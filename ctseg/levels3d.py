@@ -24,8 +24,11 @@ A small dense insert (a steel rod holding 0.6% of the voxels) leaves too few fla
 for a level, and the tail rule of slices needs 1% of them. Its tetrahedra show it: a
 mode of the tetrahedron grays above the highest level, farther than the separation, is
 a denser material (:func:`denser_levels`), since partial volume only mixes the materials
-the levels already hold. Below the lowest level no such rule applies: a dark band next to
-a dense part, an artefact, would make one.
+the levels already hold. The separation is taken in the smaller of the flat voxels' and
+the tetrahedra's spreads: thin struts (a stent's, 1-2 voxels across) mix into many
+tetrahedra and widen theirs, as partial-volume voxels widen the flat voxels' spread.
+Below the lowest level no such rule applies: a dark band next to a dense part, an
+artefact, would make one.
 """
 import numpy as np
 
@@ -187,7 +190,8 @@ def checked_levels(levels_255, flat_sigma_255, gray_255, volume, params=None, sp
     tetrahedron volume, each tetrahedron counted at its nearest level (a level the count
     forced out of a partial-volume bump gives way to the hidden material). With
     ``n_materials`` 'auto', a tetrahedron mode above the highest level is added
-    (:func:`denser_levels`).
+    (:func:`denser_levels`), its separation from the smaller of the two spreads: partial
+    volume widens one or the other, never the noise of both.
 
     Returns
     -------
@@ -239,6 +243,8 @@ def checked_levels(levels_255, flat_sigma_255, gray_255, volume, params=None, sp
         added = hidden_levels(found, h_sigma, levels_255, p)
         report["homogeneous_added_255"] = [float(v) for v in added]
         levels_255 = np.sort(np.concatenate([levels_255, added]))
-    denser = denser_levels(t_levels, t_sigma, levels_255, p)
+    # the smaller spread is the noise: the larger one holds partial volume (the flat voxels'
+    # in a small volume, the tetrahedra's in a scan whose thin struts mix into them)
+    denser = denser_levels(t_levels, min(t_sigma, flat_sigma_255), levels_255, p)
     report["denser_added_255"] = [float(v) for v in denser]
     return np.concatenate([levels_255, denser]), report

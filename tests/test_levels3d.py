@@ -156,6 +156,19 @@ def test_denser_levels_only_above_the_highest_and_beyond_the_separation():
     assert denser_levels([2.0, 90.0], 1.0, [40.0, 90.0]).size == 0
 
 
+def test_denser_levels_are_judged_in_the_smaller_of_the_two_spreads():
+    # thin struts mixing into the tetrahedra widen their spread (6) while the flat voxels
+    # show the noise (1): a mode 40 above the highest level is beyond 1's separation only
+    rng = np.random.default_rng(4)
+    gray = np.concatenate([rng.normal(20.0, 6.0, 2000), rng.normal(130.0, 2.0, 60)])
+    p = SegmentParams()
+    _, t_sigma = tetra_levels(gray, np.ones(len(gray)))
+    assert 130.0 < 90.0 + p.merge_k * t_sigma + p.merge_rel * 130.0  # the tetrahedra's spread misses it
+    levels, rep = checked_levels(np.array([20.0, 90.0]), 1.0, gray, np.ones(len(gray)))
+    assert len(rep["denser_added_255"]) == 1 and abs(rep["denser_added_255"][0] - 130.0) < 3.0
+    assert len(levels) == 3
+
+
 def _rod_in_cylinder(n=48):
     """A solid aluminium cylinder holding a steel rod of radius 3 voxels (0.5% of the
     voxels): too few flat voxels for a level of the rod's own."""
