@@ -3,7 +3,7 @@ measure (granular and porous media, all partial volume; quantized or windowed da
 clipped data, with the multi-level Otsu they share and the report of how the levels were
 found."""
 import numpy as np
-from scipy.ndimage import binary_erosion, gaussian_filter, uniform_filter
+from scipy.ndimage import binary_erosion, gaussian_filter, label, uniform_filter
 
 from .errors import ParameterError
 from .params import DEFAULTS
@@ -92,13 +92,20 @@ material's level lies more than about 0.7 noise sd inside the range and is measu
 its unclipped voxels (a uint16 scan whose air noise is cut at 0, say)."""
 
 
-TAIL_MIN_FRACTION = 0.01
+TAIL_MIN_FRACTION = 0.005
 """A material beyond the outermost level: at least this share of the pixels lies further
-than the level separation below the lowest level (or above the highest). Noise keeps a
-material's pixels within that separation and partial volume keeps them between the levels
-of the materials that mix, so such pixels need a material beyond; on a porous or granular
-scan it is the phase too fine to leave a flat pixel. Twice the share that the default
-rescale maps onto gray 0 (or 255)."""
+than the level separation below the lowest level (or above the highest), in regions of
+at least :data:`TAIL_MIN_REGION_PX`. Noise keeps a material's pixels within that
+separation and partial volume keeps them between the levels of the materials that mix,
+so such pixels need a material beyond; on a porous or granular scan it is the phase too
+fine to leave a flat pixel. The share that the default rescale maps onto gray 0 (or
+255): a tail that thin is the rescale's own."""
+
+TAIL_MIN_REGION_PX = 10
+"""Pixels beyond the separation count towards :data:`TAIL_MIN_FRACTION` only in regions of
+at least this many (8-connected within a slice): the 3 x 3 smoothing that the levels are
+measured after spreads one outlying pixel (a hot pixel, a noise spike) over exactly its 9
+pixels, so a larger region is a material's."""
 
 TAIL_LEVEL_PCT = 5.0
 """The level of such a material: this percentile of the tail's pixels counted from the far
@@ -106,8 +113,9 @@ end (its pure pixels sit at the far end, partial-volume ones towards the known l
 
 
 def tail_levels(g255, levels, separation, mask=None):
-    """Levels of materials beyond the outermost ones found (:data:`TAIL_MIN_FRACTION`), on
-    the grays smoothed over 3 x 3 within each slice, as the levels are measured.
+    """Levels of materials beyond the outermost ones found (:data:`TAIL_MIN_FRACTION`,
+    :data:`TAIL_MIN_REGION_PX`), on the grays smoothed over 3 x 3 within each slice, as the
+    levels are measured.
 
     Parameters
     ----------
@@ -131,13 +139,22 @@ def tail_levels(g255, levels, separation, mask=None):
     [7.7]
     """
     g = np.asarray(g255, float)
-    v = level_sample(g, None if mask is None else np.asarray(mask, bool), n_max=g.size)
+    stack = g[None] if g.ndim == 2 else g.reshape((-1,) + g.shape[-2:])
+    sm = uniform_filter(stack, (1, 3, 3), mode="nearest")
+    keep = np.ones(sm.shape, bool) if mask is None else np.asarray(mask, bool).reshape(sm.shape)
+    n = int(keep.sum())
     lo, hi = float(levels[0]), float(levels[-1])
+    in_slice = np.zeros((3, 3, 3), bool)
+    in_slice[1] = True
     added = []
-    for beyond, pct in ((v < lo - separation(lo), TAIL_LEVEL_PCT),
-                        (v > hi + separation(hi), 100.0 - TAIL_LEVEL_PCT)):
-        if len(v) and beyond.sum() >= TAIL_MIN_FRACTION * len(v):
-            added.append(float(np.percentile(v[beyond], pct)))
+    for beyond, pct in ((keep & (sm < lo - separation(lo)), TAIL_LEVEL_PCT),
+                        (keep & (sm > hi + separation(hi)), 100.0 - TAIL_LEVEL_PCT)):
+        regions, n_regions = label(beyond, in_slice)
+        size = np.bincount(regions.ravel(), minlength=n_regions + 1)
+        size[0] = 0
+        tail = size[regions] >= TAIL_MIN_REGION_PX
+        if n and tail.sum() >= TAIL_MIN_FRACTION * n:
+            added.append(float(np.percentile(sm[tail], pct)))
     return added
 
 
@@ -330,8 +347,8 @@ def level_report(method, reason, flat, flat_levels, low, k_cand, levels, sigma, 
         "method": method,
         "reason": reason or "flat pixels trusted",
         "criterion": criterion + ("; clipped ends are levels of their own" if clipped else "")
-        + (f"; a material beyond the outermost levels where >= {TAIL_MIN_FRACTION:.0%} of the "
-           "pixels lie a separation beyond them" if tail else ""),
+        + (f"; a material beyond the outermost levels where >= {TAIL_MIN_FRACTION:.1%} of the "
+           f"pixels lie a separation beyond them in regions of >= {TAIL_MIN_REGION_PX} px" if tail else ""),
         "flat_fraction": round(float(flat.mean()), 4),
         "flat_levels_255": [round(float(x), 2) for x in flat_levels],
         "low_gradient_fraction": None if low is None else round(float(low.mean()), 4),
