@@ -212,8 +212,8 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
     ramp across the slices (a face parallel to them) are not flat either
     (:func:`ctseg.density.flat_voxels`).
 
-    Two rules beyond that (neither changes a scan whose flat pixels can be trusted and
-    whose data are not clipped):
+    Three rules beyond that (only the last can change a scan whose flat pixels can be
+    trusted and whose data are not clipped):
 
     * Clipped data (:func:`clipped_extremes`): the voxels at a clipped extreme are a
       material of their own, at their gray: that gray replaces every level found within
@@ -231,9 +231,14 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
       pixels are low-gradient (quantized or windowed data), multi-level Otsu of all the
       pixels gives the levels instead: k the largest, up to 6, for which
       every k' <= k keeps adjacent class means at least that separation apart (sigma
-      from the flat pixels), used if it is more levels than the flat pixels gave. Then
-      (n_materials 'auto'), a phase too fine to leave a low-gradient pixel gets a level
-      beyond the outermost ones (:func:`ctseg.levels_auto.tail_levels`).
+      from the flat pixels), used if it is more levels than the flat pixels gave.
+    * A material beyond the outermost levels (n_materials 'auto';
+      :func:`ctseg.levels_auto.tail_levels`): regions of pixels further than the
+      separation above the highest level (a dense insert too small for a mode of its own
+      flat pixels), or, where the flat pixels are untrusted, below the lowest (a phase too
+      fine to leave a low-gradient pixel), get a level there. Below the lowest level only
+      then: with trusted flat pixels, the dark bands that beam hardening and scatter leave
+      between metal parts lie there.
 
     Given ``gray_levels`` (input units), those are the levels (:func:`given_levels_255`).
 
@@ -319,9 +324,11 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
             lv2, k_cand = otsu_levels(g255, lambda g: base + merge_rel * g)
             if len(lv2) > len(levels):
                 levels, method = lv2, "otsu_all_pixels"
-        if n_mat == AUTO and merge_threshold_255 == AUTO:
-            tail = tail_levels(g255, levels, lambda g: base + merge_rel * g, keep)
-            levels = np.sort(np.append(levels, tail))
+    clip_levels = [float(np.mean(g255[m])) for m in clipped]
+    if n_mat == AUTO and merge_threshold_255 == AUTO:
+        tail = tail_levels(g255, np.sort(np.append(levels, clip_levels)),
+                           lambda g: base + merge_rel * g, keep, below=reason is not None)
+        levels = np.sort(np.append(levels, tail))
     if report is not None:
         if k_cand is None:
             sel = {"low_gradient": low, "flat_pixels": flat if n_flat >= 16 else None}[method]
@@ -329,7 +336,6 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
             sep = (lambda g: base + merge_rel * g) if merge_threshold_255 == AUTO \
                 else (lambda g: merge_threshold_255)
             k_cand = otsu_candidates(sm, sep)
-    clip_levels = [float(np.mean(g255[m])) for m in clipped]
     for c in clip_levels:  # a material of its own (with n_materials, the rest found without it)
         near = np.abs(levels - c) < base if n_mat == AUTO else np.zeros(len(levels), bool)
         levels = np.sort(np.append(levels[~near], c))

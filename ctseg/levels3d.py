@@ -20,8 +20,8 @@ tetrahedra (voxels spreading less than :data:`HOMOGENEOUS_SPREAD` voxel-noise un
 lies between two levels and that no level explains (farther from each than the merge
 rules' separation) is a material of its own, and is added.
 
-A small dense insert (a steel rod holding 0.6% of the voxels) leaves too few flat voxels
-for a level, and the tail rule of slices needs 1% of them. Its tetrahedra show it: a
+A small dense insert leaves too few flat voxels for a level, and under 0.5% of the voxels
+it escapes the tail rule of the volume's levels too. Its tetrahedra show it: a
 mode of the tetrahedron grays above the highest level, farther than the separation, is
 a denser material (:func:`denser_levels`), since partial volume only mixes the materials
 the levels already hold. The separation is taken in the smaller of the flat voxels' and

@@ -112,7 +112,7 @@ TAIL_LEVEL_PCT = 5.0
 end (its pure pixels sit at the far end, partial-volume ones towards the known level)."""
 
 
-def tail_levels(g255, levels, separation, mask=None):
+def tail_levels(g255, levels, separation, mask=None, below=True):
     """Levels of materials beyond the outermost ones found (:data:`TAIL_MIN_FRACTION`,
     :data:`TAIL_MIN_REGION_PX`), on the grays smoothed over 3 x 3 within each slice, as the
     levels are measured.
@@ -126,11 +126,13 @@ def tail_levels(g255, levels, separation, mask=None):
         The level separation at a gray (as :func:`ctseg.levels.pixel_material_levels`).
     mask : bool array_like, the shape of ``g255``, optional
         The pixels that count (e.g. all but clipped ones).
+    below : bool
+        Whether to look below ``levels[0]`` too (above ``levels[-1]`` always).
 
     Returns
     -------
     added : list of float
-        At most one level below ``levels[0]`` and one above ``levels[-1]``.
+        At most one level below ``levels[0]`` (first) and one above ``levels[-1]``.
 
     Example
     -------
@@ -147,8 +149,10 @@ def tail_levels(g255, levels, separation, mask=None):
     in_slice = np.zeros((3, 3, 3), bool)
     in_slice[1] = True
     added = []
-    for beyond, pct in ((keep & (sm < lo - separation(lo)), TAIL_LEVEL_PCT),
-                        (keep & (sm > hi + separation(hi)), 100.0 - TAIL_LEVEL_PCT)):
+    sides = [(keep & (sm > hi + separation(hi)), 100.0 - TAIL_LEVEL_PCT)]
+    if below:
+        sides.insert(0, (keep & (sm < lo - separation(lo)), TAIL_LEVEL_PCT))
+    for beyond, pct in sides:
         regions, n_regions = label(beyond, in_slice)
         size = np.bincount(regions.ravel(), minlength=n_regions + 1)
         size[0] = 0

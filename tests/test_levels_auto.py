@@ -130,6 +130,42 @@ def test_the_tail_counts_regions_not_outlying_pixels():
     assert 200.0 < level <= 255.0
 
 
+def _spots(dense, dark, n=200, seed=0):
+    """Air with an aluminium block (both flat enough for levels) and spots of radius 3 px,
+    too small for flat pixels of their own: nine dense ones inside the block (0.8% of the
+    pixels), six dark ones in the air (0.6%)."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:n, 0:n]
+    lab = np.zeros((n, n), int)
+    lab[50:150, 50:150] = 1
+    for cx in (70, 100, 130):
+        for cy in (70, 100, 130):
+            lab[(np.hypot(yy - cy, xx - cx) < 3.2) & dense] = 2
+        for cy in (20, 180):
+            lab[(np.hypot(yy - cy, xx - cx) < 3.2) & dark] = 3
+    img = gaussian_filter(np.array([60.0, 150.0, 240.0, 0.0])[lab], 1.0) + rng.normal(0, 3, (n, n))
+    return img, lab
+
+
+def test_with_trusted_flat_pixels_the_tail_adds_a_denser_material_only():
+    """Flat pixels trusted: the dense spots get a level above the highest (the tail rule);
+    the dark spots, which the same rule would find below the lowest, do not (with trusted
+    flat pixels the dark bands between metal parts lie there); without the dense spots
+    the levels are the flat pixels' two."""
+    from ctseg.levels_auto import tail_levels
+    from ctseg.params import DEFAULTS
+
+    img, lab = _spots(dense=True, dark=True)
+    g, levels, report = levels_of(img)
+    assert report["method"] == "flat_pixels" and len(report["flat_levels_255"]) == 2
+    assert len(levels) == 3 and report["tail_levels_255"] == [round(levels[-1], 2)]
+    assert levels[-1] > levels[1] + 50
+    base = max(DEFAULTS.merge_floor_255, DEFAULTS.merge_k * report["sigma_255"])
+    below, above = tail_levels(g, report["flat_levels_255"], lambda x: base + DEFAULTS.merge_rel * x)
+    assert below < report["flat_levels_255"][0] and above == pytest.approx(levels[-1])
+    assert len(levels_of(_spots(dense=False, dark=True)[0])[1]) == 2
+
+
 def test_a_dense_phase_under_one_percent_is_found_beyond_the_tail():
     """The 200 x 200 porous casting: its dense inclusions leave no flat pixel and hold 0.8%
     of the pixels beyond the separation above the metal, in regions; their level comes
