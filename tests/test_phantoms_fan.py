@@ -95,7 +95,9 @@ def test_scatter_and_rings_add_their_artefacts():
     empty = Scene()
     no_rings = simulate_fan_ct(empty, 2, poly, size, pixel_mm, **ALL_OFF)
     rings = simulate_fan_ct(empty, 2, poly, size, pixel_mm, **dict(ALL_OFF, ring=0.01))
-    assert np.abs(no_rings).max() < 1e-9 and rings.std() > 1e-3
+    # the transmission is summed in float32 (sum(w) = 1 to ~1e-7), so an empty scene
+    # reconstructs to 0 within float32 rounding: 1.04e-7 on numpy 1.24 on an Intel Xeon
+    assert np.abs(no_rings).max() < 1e-5 and rings.std() > 1e-3
 
 
 def test_attenuation_table_and_spectrum():
