@@ -141,8 +141,7 @@ def tail_levels(g255, levels, separation, mask=None, below=True):
     [7.7]
     """
     g = np.asarray(g255, float)
-    stack = g[None] if g.ndim == 2 else g.reshape((-1,) + g.shape[-2:])
-    sm = uniform_filter(stack, (1, 3, 3), mode="nearest")
+    sm = smoothed_grays(g[None] if g.ndim == 2 else g.reshape((-1,) + g.shape[-2:]))
     keep = np.ones(sm.shape, bool) if mask is None else np.asarray(mask, bool).reshape(sm.shape)
     n = int(keep.sum())
     lo, hi = float(levels[0]), float(levels[-1])
@@ -290,10 +289,15 @@ def _region_share(at):
     return float(touching[at].sum()) / float(neighbours[at].sum())
 
 
+def smoothed_grays(g255):
+    """The grays smoothed over 3 x 3 within each slice, as the levels are measured."""
+    return uniform_filter(g255, (1,) * (g255.ndim - 2) + (3, 3), mode="nearest")
+
+
 def level_sample(g255, sel=None, n_max=20000):
     """The 3 x 3-smoothed grays (as :func:`pixel_material_levels` sees them) of the
     selected pixels, at most ``n_max`` of them, evenly spaced."""
-    sm = uniform_filter(g255, (1,) * (g255.ndim - 2) + (3, 3), mode="nearest")
+    sm = smoothed_grays(g255)
     sm = sm.ravel() if sel is None else sm[sel]
     return sm[np.linspace(0, len(sm) - 1, n_max).astype(int)] if len(sm) > n_max else sm
 
