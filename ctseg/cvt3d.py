@@ -6,7 +6,7 @@ from itertools import product
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ._cvt3d import _assign_3d, _feature_sums_3d, _reassign_3d, _region_sums_3d
+from ._cvt3d import _assign_3d, _feature_sums_3d, _nearest_many_3d, _reassign_3d, _region_sums_3d
 from ._validate import check_spacing
 from .errors import InputError, ParameterError
 from .params import DEFAULTS, check
@@ -264,12 +264,20 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
     # the kernels' per-voxel state, in half-size types (see ctseg._cvt3d)
     labels, second = np.empty(rho.size, np.int32), np.empty(rho.size, np.int32)
     u, l2, l3 = (np.empty(rho.size, np.float32) for _ in range(3))
+    state = (labels, second, u, l2, l3)
 
     def assign(s):
-        _assign_3d(nz, ny, nx, sx, sy, sz, np.ascontiguousarray(s), labels, second, u, l2, l3)
+        _assign_3d(nz, ny, nx, sx, sy, sz, np.ascontiguousarray(s), *state)
         return labels
 
-    sites, cls, feat = _start(sites, assign, hi, feats, w)
+    border = np.concatenate([f[0] for kind in (FACE, EDGE) for f in feats[kind]])
+    border_xyz = np.concatenate([f[1] for kind in (FACE, EDGE) for f in feats[kind]])
+
+    def border_labels(s):  # _start reads the labels of the face and edge voxels only
+        labels[border] = _nearest_many_3d(border_xyz, np.ascontiguousarray(s))
+        return labels
+
+    sites, cls, feat = _start(sites, border_labels, hi, feats, w)
     n = len(sites)
     assign(sites)
     centre = hi / 2.0
@@ -310,7 +318,7 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
         drift = np.sqrt(np.sum((new - sites) ** 2, axis=1))
         move = float(drift.max())
         old, sites = sites, np.ascontiguousarray(new)
-        _reassign_3d(nz, ny, nx, sx, sy, sz, old, sites, drift, labels, second, u, l2, l3)
+        _reassign_3d(nz, ny, nx, sx, sy, sz, old, sites, drift, *state)
         sums = _region_sums_3d(labels, w, n, nz, ny, nx, sx, sy, sz, centre)
         energy.append(energy_of(sums, sites))
         if progress is not None:
