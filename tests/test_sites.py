@@ -176,6 +176,24 @@ def heapq_ward(weights, points, edges, n_clusters):
     return sorted(tuple(sorted(c)) for c in members.values())
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_ward_merge_order_on_multigraphs(seed):
+    """Irregular graphs with repeated edges and integer centroids (many equal costs):
+    clusters joined by several edges must keep exactly one pair in the compiled heap, with
+    its current cost, as the textbook heap has it."""
+    rng = np.random.default_rng(seed)
+    m = int(rng.integers(20, 60))
+    pts = rng.integers(0, 4, (m, 2)).astype(float)
+    w = rng.integers(1, 3, m).astype(float) if seed % 2 else rng.uniform(0.5, 2.0, m)
+    extra = rng.integers(0, m, (2 * m, 2))
+    edges = np.concatenate([np.column_stack([np.arange(m - 1), np.arange(1, m)]),
+                            extra[extra[:, 0] != extra[:, 1]], [[0, 1], [1, 0]]])
+    for k in (1, 3, m // 4, m // 2):
+        labels, _, _ = ward_agglomerate(w, pts, edges, k)
+        got = sorted(tuple(np.flatnonzero(labels == c)) for c in range(k))
+        assert got == heapq_ward(w, pts, edges, k)
+
+
 @pytest.mark.parametrize("uniform", [True, False])
 def test_ward_merge_order_is_the_lazy_heaps_with_its_ties(uniform):
     """Equal weights on a grid make many merge costs equal: the ties must go as the
