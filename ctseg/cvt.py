@@ -187,7 +187,10 @@ def lloyd_cvt(rho, sites, tol_px=DEFAULTS.tol_px, max_iter=DEFAULTS.max_iter, pr
     labels = np.empty(rows * cols, np.int64)
     u = np.empty(rows * cols)
     l = np.empty(rows * cols)
-    _assign(rows, cols, sites, labels, u, l)
+    # border_barycentres reads the labels of the border lines' pixels only
+    border = np.concatenate([line[0] for line in lines])
+    border_yx = np.column_stack(np.divmod(border, cols)).astype(np.float64)
+    labels[border] = _cvt._nearest_many(np.ascontiguousarray(border_yx[:, ::-1]), sites)
     constraint = np.full(n, -1)
     line0, bary0 = border_barycentres(labels)
     on = line0 >= 0
