@@ -212,6 +212,26 @@ def _feature_sums_3d(idx, coords, labels, w, n):
 
 
 @njit(cache=True)
+def _own_feature_sums_3d(idx, coords, voxel_feature, labels, w, site_feature, n):
+    """Per region whose site lies on a box face or edge, over that feature's voxels only
+    (``idx``: the voxels of every feature, ``voxel_feature`` their feature, ``site_feature``
+    each site's, -1 for none): the weight and the weighted sums of the coordinates
+    ``coords``, summed in voxel order as :func:`_feature_sums_3d` sums one feature."""
+    sums = np.zeros((4, n))
+    for t in range(idx.shape[0]):
+        v = idx[t]
+        r = labels[v]
+        if site_feature[r] != voxel_feature[t]:
+            continue
+        wi = w[v]
+        sums[0, r] += wi
+        sums[1, r] += wi * coords[t, 0]
+        sums[2, r] += wi * coords[t, 1]
+        sums[3, r] += wi * coords[t, 2]
+    return sums
+
+
+@njit(cache=True)
 def _local_drift_3d(old_sites, drift, h, gx, gy, gz, reach):
     """Per grid cell: the largest drift among the sites that started within `reach` cells
     of it (Chebyshev)."""

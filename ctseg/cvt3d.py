@@ -6,7 +6,8 @@ from itertools import product
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ._cvt3d import _assign_3d, _feature_sums_3d, _nearest_many_3d, _reassign_3d, _region_sums_3d
+from ._cvt3d import (_assign_3d, _feature_sums_3d, _nearest_many_3d, _own_feature_sums_3d, _reassign_3d,
+                     _region_sums_3d)
 from ._validate import check_spacing
 from .errors import InputError, ParameterError
 from .params import DEFAULTS, check
@@ -279,6 +280,21 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
 
     sites, cls, feat = _start(sites, border_labels, hi, feats, w)
     n = len(sites)
+    # the face and edge sites' features, numbered 0-5 (faces) and 6-17 (edges), and the
+    # values their fixed axes hold
+    listed = [(kind, f, feature) for kind in (FACE, EDGE) for f, feature in enumerate(feats[kind])]
+    f_idx = np.concatenate([feature[0] for _, _, feature in listed])
+    f_coords = np.concatenate([feature[1] for _, _, feature in listed])
+    f_id = np.repeat(np.arange(len(listed)), [len(feature[0]) for _, _, feature in listed])
+    site_fid = np.full(n, -1, np.int64)
+    fixed_mask = np.zeros((n, 3), bool)
+    fixed_value = np.zeros((n, 3))
+    for g, (kind, f, (_, _, fixed, values)) in enumerate(listed):
+        on = (cls == kind) & (feat == f)
+        site_fid[on] = g
+        fixed_mask[np.ix_(on, fixed)] = True
+        fixed_value[np.ix_(on, fixed)] = values
+    border = np.flatnonzero(site_fid >= 0)
     assign(sites)
     centre = hi / 2.0
     vox = sx * sy * sz
@@ -300,20 +316,18 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
         if omega != 1.0:  # over-relaxed; a step that would leave the box stays Lloyd's
             over = sites + omega * (new - sites)
             new = np.where(np.all((over >= 0) & (over <= hi), axis=1)[:, None], over, new)
-        for kind in (FACE, EDGE):
-            bary = _barycentres(feats[kind], labels, w, n)
-            for f, ((_, _, fixed, values), (bw, b)) in enumerate(zip(feats[kind], bary)):
-                sel = np.flatnonzero((cls == kind) & (feat == f) & ~empty)
-                if len(sel) == 0:
-                    continue
-                proj = m[sel].copy()  # constrained minimiser: never raises F
-                free_axes = [a for a in range(3) if a not in fixed]
-                proj[:, free_axes] = np.clip(proj[:, free_axes], margin, hi[free_axes] - margin)
-                proj[:, fixed] = values
-                cur = np.sum((sites[sel] - m[sel]) ** 2, axis=1)
-                e6 = np.sum((b[sel] - m[sel]) ** 2, axis=1)
-                use6 = (bw[sel] > 0) & (e6 <= cur)
-                new[sel] = np.where(use6[:, None], b[sel], proj)
+        sel = border[~empty[border]]
+        if len(sel):
+            sums_b = _own_feature_sums_3d(f_idx, f_coords, f_id, labels, w, site_fid, n)[:, sel]
+            bw = sums_b[0]
+            b = np.where(fixed_mask[sel], fixed_value[sel],
+                         (sums_b[1:4] / np.where(bw > 0, bw, 1.0)).T)  # eq. 6 on the feature
+            # the constrained minimiser: never raises F
+            proj = np.where(fixed_mask[sel], fixed_value[sel], np.clip(m[sel], margin, hi - margin))
+            cur = np.sum((sites[sel] - m[sel]) ** 2, axis=1)
+            e6 = np.sum((b - m[sel]) ** 2, axis=1)
+            use6 = (bw > 0) & (e6 <= cur)
+            new[sel] = np.where(use6[:, None], b, proj)
         new[cls == CORNER] = sites[cls == CORNER]
         drift = np.sqrt(np.sum((new - sites) ** 2, axis=1))
         move = float(drift.max())
