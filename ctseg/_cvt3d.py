@@ -234,7 +234,8 @@ def _own_feature_sums_3d(idx, coords, voxel_feature, labels, w, site_feature, n)
 @njit(cache=True)
 def _local_drift_3d(old_sites, drift, h, gx, gy, gz, reach):
     """Per grid cell: the largest drift among the sites that started within `reach` cells
-    of it (Chebyshev)."""
+    of it (Chebyshev): the cells' own largest drifts, then a running maximum along x, y
+    and z in turn (a maximum over a box is one over each axis in turn)."""
     nc = gx * gy * gz
     top = np.zeros(nc)
     for k in range(old_sites.shape[0]):
@@ -244,14 +245,27 @@ def _local_drift_3d(old_sites, drift, h, gx, gy, gz, reach):
         c = (cz * gy + cy) * gx + cx
         top[c] = max(top[c], drift[k])
     out = np.zeros(nc)
-    for cz in range(gz):
+    for cz in range(gz):  # along x: top -> out
         for cy in range(gy):
+            row = (cz * gy + cy) * gx
             for cx in range(gx):
                 m = 0.0
+                for xx in range(max(cx - reach, 0), min(cx + reach + 1, gx)):
+                    m = max(m, top[row + xx])
+                out[row + cx] = m
+    for cz in range(gz):  # along y: out -> top
+        for cx in range(gx):
+            for cy in range(gy):
+                m = 0.0
+                for yy in range(max(cy - reach, 0), min(cy + reach + 1, gy)):
+                    m = max(m, out[(cz * gy + yy) * gx + cx])
+                top[(cz * gy + cy) * gx + cx] = m
+    for cy in range(gy):  # along z: top -> out
+        for cx in range(gx):
+            for cz in range(gz):
+                m = 0.0
                 for zz in range(max(cz - reach, 0), min(cz + reach + 1, gz)):
-                    for yy in range(max(cy - reach, 0), min(cy + reach + 1, gy)):
-                        for xx in range(max(cx - reach, 0), min(cx + reach + 1, gx)):
-                            m = max(m, top[(zz * gy + yy) * gx + xx])
+                    m = max(m, top[(zz * gy + cy) * gx + cx])
                 out[(cz * gy + cy) * gx + cx] = m
     return out
 

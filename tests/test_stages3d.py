@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from ctseg import density_map
-from ctseg._cvt3d import _assign_3d, _nearest_many_3d, _reassign_3d
+from ctseg._cvt3d import _assign_3d, _local_drift_3d, _nearest_many_3d, _reassign_3d, _site_grid_3d
 from ctseg.cvt3d import CORNER, EDGE, FACE, FREE, _not_coincident, coarse_sites_3d, lloyd_cvt_3d
 from ctseg.density import density_volume
 from ctseg.errors import InputError, ParameterError
@@ -417,6 +417,26 @@ def kernel_state(size):
     """The kernels' per-voxel arrays, of the types lloyd_cvt_3d gives them."""
     return ([np.empty(size, np.int32), np.empty(size, np.int32)]
             + [np.empty(size, np.float32) for _ in range(3)])
+
+
+@pytest.mark.parametrize("reach", [1, 3])
+def test_local_drift_is_the_largest_drift_in_the_cell_box(reach):
+    """The per-cell drift bound of the incremental assignment: for every grid cell, the
+    largest drift of the sites that started within ``reach`` cells (Chebyshev), against
+    scipy's maximum filter over the cells' own largest drifts."""
+    from scipy.ndimage import maximum_filter
+
+    rng = np.random.default_rng(reach)
+    for n, ext in ((7, (3.0, 40.0, 9.0)), (400, (30.0, 20.0, 25.0)), (2500, (10.0, 60.0, 60.0))):
+        sites = rng.uniform(0, 1, (n, 3)) * ext
+        drift = rng.exponential(0.2, n) * (rng.uniform(size=n) < 0.6)
+        h, gx, gy, gz, _, _ = _site_grid_3d(sites, *ext)
+        cell = np.minimum((sites / h).astype(int), [gx - 1, gy - 1, gz - 1])
+        top = np.zeros((gz, gy, gx))
+        np.maximum.at(top, (cell[:, 2], cell[:, 1], cell[:, 0]), drift)
+        want = maximum_filter(top, size=2 * reach + 1, mode="constant", cval=0.0)
+        got = _local_drift_3d(sites, drift, h, gx, gy, gz, reach).reshape(gz, gy, gx)
+        assert np.array_equal(got, want)
 
 
 @pytest.mark.parametrize("ties", [False, True])
