@@ -147,7 +147,8 @@ def _start(sites, labels_of, hi, feats, w):
         sites[k], cls[k], feat[k] = corner, CORNER, c
     labels = labels_of(sites)
     new_sites, new_feat, new_cls = [], [], []
-    taken = {tuple(p) for p in sites}
+    # a new site lies on a face, so only a site on the box's surface can coincide with it
+    taken = {tuple(p) for p in sites[np.any((sites == 0) | (sites == hi), axis=1)]}
     for kind in (EDGE, FACE):  # a site on an edge line is an edge site, not a face site
         bary = _barycentres(feats[kind], labels, w, n)
         for f, ((_, _, fixed, values), (bw, b)) in enumerate(zip(feats[kind], bary)):
