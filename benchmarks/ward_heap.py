@@ -20,7 +20,7 @@ from accuracy import write_results  # benchmarks/ is this script's folder
 from numba import njit
 
 from ctseg import stages3d
-from ctseg._ward import _ward_merges
+from ctseg._ward import _neighbour_lists, _ward_merges, _ward_pair_cost
 from ctseg.density import density_map
 from ctseg.phantoms import make_phantom
 from ctseg.phantoms3d import make_part_3d
@@ -45,19 +45,7 @@ def _lazy_ward_merges(w, s, ea, eb, m, n_clusters):
     into, itself for a survivor) and the number of clusters left.
     """
     e = ea.shape[0]
-    nxt = np.full(2 * e, -1, np.int64)
-    tgt = np.empty(2 * e, np.int64)
-    head = np.full(m, -1, np.int64)
-    tail = np.full(m, -1, np.int64)
-    for k in range(2 * e):
-        a = ea[k // 2] if k % 2 == 0 else eb[k // 2]
-        b = eb[k // 2] if k % 2 == 0 else ea[k // 2]
-        tgt[k] = b
-        if head[a] < 0:
-            head[a] = k
-        else:
-            nxt[tail[a]] = k
-        tail[a] = k
+    nxt, tgt, head, tail = _neighbour_lists(ea, eb, m)
     parent = np.arange(m)
     alive = np.ones(m, np.bool_)
     version = np.zeros(m, np.int64)
@@ -71,7 +59,7 @@ def _lazy_ward_merges(w, s, ea, eb, m, n_clusters):
     for k in range(e):
         i = min(ea[k], eb[k])
         j = max(ea[k], eb[k])
-        cost[0] = _lazy_ward_pair_cost(w, s, i, j)
+        cost[0] = _ward_pair_cost(w, s, i, j)
         heap[k, 0] = cost_bits[0]
         heap[k, 1] = i * mm + j
         heap[k, 2] = 0
@@ -128,7 +116,7 @@ def _lazy_ward_merges(w, s, ea, eb, m, n_clusters):
                 grown = np.empty((2 * n, 3), np.int64)
                 grown[:n] = heap[:n]
                 heap = grown
-            cost[0] = _lazy_ward_pair_cost(w, s, a, b)
+            cost[0] = _ward_pair_cost(w, s, a, b)
             heap[n, 0] = cost_bits[0]
             heap[n, 1] = a * mm + b
             heap[n, 2] = version[a] * _LAZY_VERSION + version[b]
@@ -188,17 +176,6 @@ def _lazy_sift_up(heap, pos):
     heap[pos, 0] = c0
     heap[pos, 1] = c1
     heap[pos, 2] = c2
-
-
-@njit(cache=False)
-def _lazy_ward_pair_cost(w, s, i, j):
-    wi = w[i]
-    wj = w[j]
-    d2 = 0.0  # 0.0 + dx * dx + dy * dy: the same bits as dx * dx + dy * dy
-    for ax in range(s.shape[1]):
-        d = s[i, ax] / wi - s[j, ax] / wj
-        d2 += d * d
-    return wi * wj / (wi + wj) * d2
 
 
 def _graphs():

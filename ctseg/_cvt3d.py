@@ -195,28 +195,11 @@ def _region_sums_3d(labels, w, n, nz, ny, nx, sx, sy, sz, centre):
 
 
 @njit(cache=True)
-def _feature_sums_3d(idx, coords, labels, w, n):
-    """Per region, over the voxels ``idx`` of one box face or edge: the weight and the
-    weighted sums of the coordinates ``coords`` (summed in voxel order, as np.bincount
-    sums)."""
-    sums = np.zeros((4, n))
-    for t in range(idx.shape[0]):
-        v = idx[t]
-        r = labels[v]
-        wi = w[v]
-        sums[0, r] += wi
-        sums[1, r] += wi * coords[t, 0]
-        sums[2, r] += wi * coords[t, 1]
-        sums[3, r] += wi * coords[t, 2]
-    return sums
-
-
-@njit(cache=True)
 def _own_feature_sums_3d(idx, coords, voxel_feature, labels, w, site_feature, n):
-    """Per region whose site lies on a box face or edge, over that feature's voxels only
-    (``idx``: the voxels of every feature, ``voxel_feature`` their feature, ``site_feature``
-    each site's, -1 for none): the weight and the weighted sums of the coordinates
-    ``coords``, summed in voxel order as :func:`_feature_sums_3d` sums one feature."""
+    """Per region, over the voxels ``idx`` (of box faces and edges) of its own site's
+    feature only (``voxel_feature`` each voxel's feature, ``site_feature`` each site's, -1
+    for none; all zero: every region over one feature): the weight and the weighted sums
+    of the coordinates ``coords``, summed in voxel order (as np.bincount sums)."""
     sums = np.zeros((4, n))
     for t in range(idx.shape[0]):
         v = idx[t]
@@ -245,29 +228,22 @@ def _local_drift_3d(old_sites, drift, h, gx, gy, gz, reach):
         c = (cz * gy + cy) * gx + cx
         top[c] = max(top[c], drift[k])
     out = np.zeros(nc)
-    for cz in range(gz):  # along x: top -> out
-        for cy in range(gy):
-            row = (cz * gy + cy) * gx
-            for cx in range(gx):
-                m = 0.0
-                for xx in range(max(cx - reach, 0), min(cx + reach + 1, gx)):
-                    m = max(m, top[row + xx])
-                out[row + cx] = m
-    for cz in range(gz):  # along y: out -> top
-        for cx in range(gx):
-            for cy in range(gy):
-                m = 0.0
-                for yy in range(max(cy - reach, 0), min(cy + reach + 1, gy)):
-                    m = max(m, out[(cz * gy + yy) * gx + cx])
-                top[(cz * gy + cy) * gx + cx] = m
-    for cy in range(gy):  # along z: top -> out
-        for cx in range(gx):
-            for cz in range(gz):
-                m = 0.0
-                for zz in range(max(cz - reach, 0), min(cz + reach + 1, gz)):
-                    m = max(m, top[(zz * gy + cy) * gx + cx])
-                out[(cz * gy + cy) * gx + cx] = m
+    _running_max(top, out, 1, gx, reach)
+    _running_max(out, top, gx, gy, reach)
+    _running_max(top, out, gx * gy, gz, reach)
     return out
+
+
+@njit(cache=True)
+def _running_max(src, dst, stride, size, reach):
+    """dst[c]: the largest src within ``reach`` cells of c along the axis whose cells are
+    ``stride`` apart in the flat grid and ``size`` long."""
+    for c in range(src.shape[0]):
+        a = (c // stride) % size
+        m = 0.0
+        for t in range(max(a - reach, 0), min(a + reach + 1, size)):
+            m = max(m, src[c + (t - a) * stride])
+        dst[c] = m
 
 
 @njit(cache=True)

@@ -33,19 +33,7 @@ def _ward_merges(w, s, ea, eb, m, n_clusters):
     itself for a survivor) and the number of clusters left.
     """
     e = ea.shape[0]
-    nxt = np.full(2 * e, -1, np.int64)
-    tgt = np.empty(2 * e, np.int64)
-    head = np.full(m, -1, np.int64)
-    tail = np.full(m, -1, np.int64)
-    for k in range(2 * e):
-        a = ea[k // 2] if k % 2 == 0 else eb[k // 2]
-        b = eb[k // 2] if k % 2 == 0 else ea[k // 2]
-        tgt[k] = b
-        if head[a] < 0:
-            head[a] = k
-        else:
-            nxt[tail[a]] = k
-        tail[a] = k
+    nxt, tgt, head, tail = _neighbour_lists(ea, eb, m)
     parent = np.arange(m)
     alive = np.ones(m, np.bool_)
     stamp = np.full(m, -1, np.int64)
@@ -115,6 +103,28 @@ def _ward_merges(w, s, ea, eb, m, n_clusters):
             head[i] = -1
         n_alive -= 1
     return parent, n_alive
+
+
+@njit(cache=True)
+def _neighbour_lists(ea, eb, m):
+    """The graph's neighbour lists as linked lists in one record pool: record 2k (in
+    ea[k]'s list) points to eb[k], record 2k + 1 (in eb[k]'s) to ea[k]; returns (next
+    record, target, each node's first and last record; -1 for none)."""
+    e = ea.shape[0]
+    nxt = np.full(2 * e, -1, np.int64)
+    tgt = np.empty(2 * e, np.int64)
+    head = np.full(m, -1, np.int64)
+    tail = np.full(m, -1, np.int64)
+    for k in range(2 * e):
+        a = ea[k // 2] if k % 2 == 0 else eb[k // 2]
+        b = eb[k // 2] if k % 2 == 0 else ea[k // 2]
+        tgt[k] = b
+        if head[a] < 0:
+            head[a] = k
+        else:
+            nxt[tail[a]] = k
+        tail[a] = k
+    return nxt, tgt, head, tail
 
 
 @njit(cache=True)

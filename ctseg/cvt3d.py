@@ -6,8 +6,7 @@ from itertools import product
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ._cvt3d import (_assign_3d, _feature_sums_3d, _nearest_many_3d, _own_feature_sums_3d, _reassign_3d,
-                     _region_sums_3d)
+from ._cvt3d import _assign_3d, _nearest_many_3d, _own_feature_sums_3d, _reassign_3d, _region_sums_3d
 from ._validate import check_spacing
 from .errors import InputError, ParameterError
 from .params import DEFAULTS, check
@@ -97,7 +96,8 @@ def _barycentres(features, labels, w, n):
     its voxels there (n, 3), exactly on the feature's plane or line."""
     result = []
     for idx, coords, fixed, values in features:
-        sums = _feature_sums_3d(idx, coords, labels, w, n)
+        sums = _own_feature_sums_3d(idx, coords, np.zeros(len(idx), np.int64), labels, w,
+                                    np.zeros(n, np.int64), n)
         bw = sums[0]
         bary = (sums[1:4] / np.where(bw > 0, bw, 1.0)).T
         for b, v in zip(fixed, values):
