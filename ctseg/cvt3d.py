@@ -1,19 +1,16 @@
 """3D stage 3 (SPEC 9.3): centroidal Voronoi tessellation of the voxels by Lloyd iterations,
 in physical units, with corner, edge and face sites that keep the box covered."""
 from dataclasses import dataclass, field
-from itertools import product
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ._box3d import (CORNER, EDGE, FACE, FREE, SITE_CLASSES, border_voxels, box_features,  # noqa: F401
+                     feature_tables, start_sites)
 from ._cvt3d import _assign_3d, _nearest_many_3d, _own_feature_sums_3d, _reassign_3d, _region_sums_3d
 from ._validate import check_spacing
 from .errors import InputError, ParameterError
 from .params import DEFAULTS, check
-
-FREE, FACE, EDGE, CORNER = 0, 1, 2, 3
-SITE_CLASSES = ("free", "face", "edge", "corner")
-"""Names of the site classes, indexed by :attr:`CVT3DResult.site_class`."""
 
 _COINCIDENT_VOXELS = 1e-6
 """Sites closer than this (times the smallest spacing) to another site are dropped after
@@ -64,48 +61,6 @@ class CVT3DResult:
     coarse_iter: int = 0
 
 
-def _features(n_xyz, sp):
-    """Faces and edges of the box: their interior voxels (flat indices), the voxels'
-    physical coordinates, and the fixed axes with their values.
-
-    Returns ``{FACE: [...], EDGE: [...]}``, each a list in feature-number order of
-    ``(idx, coords (m, 3), fixed_axes, fixed_values)``.
-    """
-    nx, ny, _ = n_xyz
-    hi = (np.array(n_xyz) - 1) * sp
-    out = {FACE: [], EDGE: []}
-    for kind, n_fixed in ((FACE, 1), (EDGE, 2)):
-        for axis in range(3):
-            fixed = [axis] if kind == FACE else [b for b in range(3) if b != axis]
-            for sides in product((0, 1), repeat=n_fixed):
-                ranges = [np.arange(1, n - 1) for n in n_xyz]
-                for b, side in zip(fixed, sides):
-                    ranges[b] = np.array([side * (n_xyz[b] - 1)])
-                ii, jj, kk = (g.ravel() for g in np.meshgrid(*ranges, indexing="ij"))
-                order = np.argsort((kk * ny + jj) * nx + ii, kind="stable")
-                ijk = np.column_stack([ii, jj, kk])[order]
-                idx = (ijk[:, 2] * ny + ijk[:, 1]) * nx + ijk[:, 0]
-                coords = ijk * sp
-                values = [side * hi[b] for b, side in zip(fixed, sides)]
-                out[kind].append((idx, coords, fixed, values))
-    return out
-
-
-def _barycentres(features, labels, w, n):
-    """Per feature: each region's rho weight on it (n,) and the rho-weighted barycentre of
-    its voxels there (n, 3), exactly on the feature's plane or line."""
-    result = []
-    for idx, coords, fixed, values in features:
-        sums = _own_feature_sums_3d(idx, coords, np.zeros(len(idx), np.int64), labels, w,
-                                    np.zeros(n, np.int64), n)
-        bw = sums[0]
-        bary = (sums[1:4] / np.where(bw > 0, bw, 1.0)).T
-        for b, v in zip(fixed, values):
-            bary[:, b] = v
-        result.append((bw, bary))
-    return result
-
-
 def _check(rho, sites, spacing, tol_px, max_iter):
     rho = np.asarray(rho, dtype=np.float64)
     if (rho.ndim != 3 or min(rho.shape) < 2 or not np.all(np.isfinite(rho))
@@ -130,48 +85,6 @@ def _check(rho, sites, spacing, tol_px, max_iter):
     if len(np.unique(sites, axis=0)) != n:
         raise InputError("sites: two sites coincide")
     return rho, sites, sp, hi, tol_px, max_iter
-
-
-def _start(sites, labels_of, hi, feats, w):
-    """Pin the corners, classify the starting sites and add the face and edge sites."""
-    corners = np.array([[sx * hi[0], sy * hi[1], sz * hi[2]]
-                        for sz, sy, sx in product((0, 1), repeat=3)])
-    sites = sites.copy()
-    n = len(sites)
-    cls = np.full(n, FREE, np.int8)
-    feat = np.full(n, -1, np.int64)
-    for c, corner in enumerate(corners):
-        d = np.sum((sites - corner) ** 2, axis=1)
-        d[cls == CORNER] = np.inf
-        k = int(np.argmin(d))
-        sites[k], cls[k], feat[k] = corner, CORNER, c
-    labels = labels_of(sites)
-    new_sites, new_feat, new_cls = [], [], []
-    # a new site lies on a face, so only a site on the box's surface can coincide with it
-    taken = {tuple(p) for p in sites[np.any((sites == 0) | (sites == hi), axis=1)]}
-    for kind in (EDGE, FACE):  # a site on an edge line is an edge site, not a face site
-        bary = _barycentres(feats[kind], labels, w, n)
-        for f, ((_, _, fixed, values), (bw, b)) in enumerate(zip(feats[kind], bary)):
-            on = np.all(sites[:, fixed] == values, axis=1)  # on the closed face or edge
-            mine = on & (cls == FREE) & (bw > 0)
-            sites[mine], cls[mine], feat[mine] = b[mine], kind, f
-            add = (bw > 0) & ~on
-            if not add.any() and not np.any((cls == kind) & (feat == f)) and bw.max() > 0:
-                add = np.arange(n) == np.argmax(bw)  # only corners or edges reach it
-            for k in np.flatnonzero(add):
-                p = tuple(b[k])
-                if p not in taken:
-                    taken.add(p)
-                    new_sites.append(b[k])
-                    new_cls.append(kind)
-                    new_feat.append(f)
-    if new_sites:
-        sites = np.vstack([sites, new_sites])
-        cls = np.concatenate([cls, np.array(new_cls, np.int8)])
-        feat = np.concatenate([feat, new_feat])
-    if len(np.unique(sites, axis=0)) != len(sites):
-        raise InputError("sites: two starting sites coincide after snapping to the box faces")
-    return np.ascontiguousarray(sites), cls, feat
 
 
 def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
@@ -262,7 +175,7 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
     nz, ny, nx = rho.shape
     sx, sy, sz = (float(v) for v in sp)
     w = np.ascontiguousarray(rho.ravel())
-    feats = _features((nx, ny, nz), sp)
+    feats = box_features((nx, ny, nz), sp)
     # the kernels' per-voxel state, in half-size types (see ctseg._cvt3d)
     labels, second = np.empty(rho.size, np.int32), np.empty(rho.size, np.int32)
     u, l2, l3 = (np.empty(rho.size, np.float32) for _ in range(3))
@@ -272,29 +185,15 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
         _assign_3d(nz, ny, nx, sx, sy, sz, np.ascontiguousarray(s), *state)
         return labels
 
-    border = np.concatenate([f[0] for kind in (FACE, EDGE) for f in feats[kind]])
-    border_xyz = np.concatenate([f[1] for kind in (FACE, EDGE) for f in feats[kind]])
+    border_idx, border_xyz = border_voxels(feats)
 
-    def border_labels(s):  # _start reads the labels of the face and edge voxels only
-        labels[border] = _nearest_many_3d(border_xyz, np.ascontiguousarray(s))
+    def border_labels(s):  # start_sites reads the labels of the face and edge voxels only
+        labels[border_idx] = _nearest_many_3d(border_xyz, np.ascontiguousarray(s))
         return labels
 
-    sites, cls, feat = _start(sites, border_labels, hi, feats, w)
+    sites, cls, feat = start_sites(sites, border_labels, hi, feats, w)
     n = len(sites)
-    # the face and edge sites' features, numbered 0-5 (faces) and 6-17 (edges), and the
-    # values their fixed axes hold
-    listed = [(kind, f, feature) for kind in (FACE, EDGE) for f, feature in enumerate(feats[kind])]
-    f_idx = np.concatenate([feature[0] for _, _, feature in listed])
-    f_coords = np.concatenate([feature[1] for _, _, feature in listed])
-    f_id = np.repeat(np.arange(len(listed)), [len(feature[0]) for _, _, feature in listed])
-    site_fid = np.full(n, -1, np.int64)
-    fixed_mask = np.zeros((n, 3), bool)
-    fixed_value = np.zeros((n, 3))
-    for g, (kind, f, (_, _, fixed, values)) in enumerate(listed):
-        on = (cls == kind) & (feat == f)
-        site_fid[on] = g
-        fixed_mask[np.ix_(on, fixed)] = True
-        fixed_value[np.ix_(on, fixed)] = values
+    f_idx, f_coords, f_id, site_fid, fixed_mask, fixed_value = feature_tables(feats, cls, feat)
     border = np.flatnonzero(site_fid >= 0)
     assign(sites)
     centre = hi / 2.0
