@@ -107,12 +107,11 @@ def border_voxels(features):
 
 
 def feature_tables(features, cls, feat):
-    """What each Lloyd iteration needs to move the face and edge sites: every face and edge
-    voxel (flat index, coordinates, feature number: faces 0-5, edges 6-17), each site's
-    feature number (-1: a free or corner site), and the axes its feature fixes with their
+    """What each Lloyd iteration needs to move the face and edge sites: the feature number
+    of every face and edge voxel in :func:`border_voxels`'s order (faces 0-5, edges 6-17),
+    each site's (-1: a free or corner site), and the axes its feature fixes with their
     values."""
     listed = [(kind, f, feature) for kind in (FACE, EDGE) for f, feature in enumerate(features[kind])]
-    idx, coords = border_voxels(features)
     voxel_feature = np.repeat(np.arange(len(listed)), [len(feature[0]) for _, _, feature in listed])
     n = len(cls)
     site_feature = np.full(n, -1, np.int64)
@@ -123,4 +122,4 @@ def feature_tables(features, cls, feat):
         site_feature[on] = g
         fixed_mask[np.ix_(on, fixed)] = True
         fixed_value[np.ix_(on, fixed)] = values
-    return idx, coords, voxel_feature, site_feature, fixed_mask, fixed_value
+    return voxel_feature, site_feature, fixed_mask, fixed_value

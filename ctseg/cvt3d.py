@@ -193,8 +193,8 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
 
     sites, cls, feat = start_sites(sites, border_labels, hi, feats, w)
     n = len(sites)
-    f_idx, f_coords, f_id, site_fid, fixed_mask, fixed_value = feature_tables(feats, cls, feat)
-    border = np.flatnonzero(site_fid >= 0)
+    voxel_feature, site_feature, fixed_mask, fixed_value = feature_tables(feats, cls, feat)
+    border_sites = np.flatnonzero(site_feature >= 0)
     assign(sites)
     centre = hi / 2.0
     vox = sx * sy * sz
@@ -216,9 +216,10 @@ def lloyd_cvt_3d(rho, sites, spacing=(1.0, 1.0, 1.0), tol_px=DEFAULTS.tol_px,
         if omega != 1.0:  # over-relaxed; a step that would leave the box stays Lloyd's
             over = sites + omega * (new - sites)
             new = np.where(np.all((over >= 0) & (over <= hi), axis=1)[:, None], over, new)
-        sel = border[~empty[border]]
+        sel = border_sites[~empty[border_sites]]
         if len(sel):
-            sums_b = _own_feature_sums_3d(f_idx, f_coords, f_id, labels, w, site_fid, n)[:, sel]
+            sums_b = _own_feature_sums_3d(border_idx, border_xyz, voxel_feature, labels, w, site_feature,
+                                          n)[:, sel]
             bw = sums_b[0]
             b = np.where(fixed_mask[sel], fixed_value[sel],
                          (sums_b[1:4] / np.where(bw > 0, bw, 1.0)).T)  # eq. 6 on the feature
