@@ -19,6 +19,11 @@ them more than ``L^2`` says: the ``polynomial`` model (``streak_model``, the def
 second-order terms of the deficit in the total attenuation), each with its own weight, and
 is kept only where it leaves ``streak_min_gain`` less of the variance than the square
 model alone (else its extra terms fit other errors: clipping, scatter, edges).
+
+Scatter and detector glare leave a smooth glow around a dense part, tens of pixels wide,
+that no path-length term makes: the ``halo`` model (the default) adds the metal mask
+blurred by a Gaussian, its width the one of :data:`HALO_SIGMAS_PX` that explains most, kept
+where it removes :data:`HALO_MIN_GAIN` of what the model without it leaves.
 """
 from dataclasses import dataclass
 
@@ -30,9 +35,9 @@ from .errors import ParameterError
 from .intensity import rescale_gray
 from .levels import flat_pixels, pixel_material_levels
 from .params import AUTO, DEFAULTS, check, resolve
-from .streak_basis import (BASIS_MAX_PX, EXTRA_MAX_PX, STREAK_MODELS, _fit_columns,  # noqa: F401
-                           fit_streak_weight, fit_streak_weights, metal_streak_basis,
-                           streak_bases)
+from .streak_basis import (BASIS_MAX_PX, EXTRA_MAX_PX, HALO_MIN_GAIN, HALO_SIGMAS_PX,  # noqa: F401
+                           STREAK_MODELS, _fit_columns, fit_streak_weight, fit_streak_weights,
+                           halo_basis, metal_streak_basis, streak_bases)
 
 
 @dataclass
@@ -43,7 +48,8 @@ class StreakCorrection:
     nothing was corrected), the share of within-material variance
     ``explained``, ``metal_pixels`` counted, the largest change ``max_change`` outside the
     metal (input units), ``reason`` when no correction was made and the model's
-    ``weights`` (one per basis of :func:`streak_bases`; empty when not corrected)."""
+    ``weights`` (one per basis of :func:`streak_bases`, then the glow's; empty when not
+    corrected) and the glow's Gaussian sd ``halo_px`` (:func:`halo_basis`; 0 when none)."""
 
     image: np.ndarray
     weight: float = 0.0
@@ -52,12 +58,14 @@ class StreakCorrection:
     max_change: float = 0.0
     reason: str = ""
     weights: tuple = ()
+    halo_px: float = 0.0
 
     def summary(self):
         """The figures as a JSON-ready dict (``diagnostics["streak_correction"]``)."""
         return {"weight": self.weight, "explained": self.explained,
                 "metal_pixels": self.metal_pixels, "max_change": self.max_change,
-                "skipped": self.reason, "weights": list(self.weights)}
+                "skipped": self.reason, "weights": list(self.weights),
+                "halo_px": self.halo_px}
 
 
 def correct_metal_streaks(image, levels, *, flat=None,
@@ -88,12 +96,14 @@ def correct_metal_streaks(image, levels, *, flat=None,
     streak_min_explained : float
         Share of the within-material variance the correction must remove to be applied.
     streak_model : str
-        The artifact's terms (:func:`streak_bases`): ``square`` (``L^2``) or
+        The artifact's terms (:func:`streak_bases`): ``square`` (``L^2``),
         ``polynomial`` (also ``L^3`` and ``L P``, P the path through the materials between
-        air and metal; their weights fitted together with the same least squares).
+        air and metal; their weights fitted together with the same least squares) or
+        ``halo`` (also the glow :func:`halo_basis` of one width of :data:`HALO_SIGMAS_PX`).
     streak_min_gain : float
-        The polynomial model is used only when it leaves at most ``1 - streak_min_gain``
-        of the within-material variance the square model leaves; else the square one.
+        The polynomial terms are used only when they leave at most ``1 - streak_min_gain``
+        of the within-material variance the square model leaves (the glow: at most
+        ``1 - HALO_MIN_GAIN`` of what the model without it leaves).
     n_angles : int, optional
         See :func:`metal_streak_basis`.
 
@@ -128,6 +138,8 @@ def correct_metal_streaks(image, levels, *, flat=None,
     when they remove ``streak_min_gain`` of what the square model leaves: on an 8-bit
     clipped steel fastener they fitted the clipping (0.33 -> 0.40 explained) and made a
     false fifth material.
+    The same fastener glows in the plate around it (scatter and crosstalk): the ``halo``
+    model takes that off (README, *Accuracy*, another simulator).
 
     Example
     -------
@@ -161,48 +173,68 @@ def correct_metal_streaks(image, levels, *, flat=None,
     near = ndimage.binary_dilation(metal, iterations=margin_px) if margin_px else metal
     fit_mask = flat & ~near
     other = (classes > 0) & ~metal  # the non-air materials below the metal
-    bases = streak_bases(metal, other, model=model, n_angles=n_angles)
-    if len(bases) > 1:
-        values, cols = img[fit_mask], [b[fit_mask] for b in bases]  # once, not every round
+    bases = streak_bases(metal, other, model="square" if model == "square" else "polynomial",
+                         n_angles=n_angles)
+    values = img[fit_mask]
 
-    def fit(n_bases, classes):
-        """Fit and re-classify ``rounds`` times: (weights, explained, weight, change), or
-        None when the weight is not positive."""
+    def fit(bs, classes):
+        """Fit the bases ``bs`` and re-classify ``rounds`` times: (weights, explained,
+        weight, change, classes, bs), or None when the weight is not positive."""
+        cols = [b[fit_mask] for b in bs] if len(bs) > 1 else None
         for _ in range(rounds):
             # weight: that of FBP(L^2) closest to the whole correction (the square model's
             # own weight); it must brighten where the metal's streaks darken
-            if n_bases == 1:  # the square model exactly as before the polynomial one
-                weight, explained = fit_streak_weight(img, bases[0], classes, fit_mask)
+            if len(bs) == 1:  # the square model exactly as before the polynomial one
+                weight, explained = fit_streak_weight(img, bs[0], classes, fit_mask)
                 weights = np.array([weight])
             else:
                 weights, explained, weight = _fit_columns(values, cols, classes[fit_mask])
             if weight <= 0.0:
                 return None
-            change = sum(w * b for w, b in zip(weights, bases))
+            change = sum(w * b for w, b in zip(weights, bs))
             new_classes = _nearest_level(img + change, lv, sigma)
             if np.array_equal(new_classes, classes):  # a fixed point: later rounds repeat it
                 break
             classes = new_classes
-        return weights, explained, weight, change
+        return weights, explained, weight, change, classes, bs
 
-    best = fit(1, classes)
+    def better(new, old, gain=min_gain):
+        """``new`` where its extra terms remove ``gain`` of what ``old`` leaves (else they
+        fit other errors: clipping, scatter, edges)."""
+        left = 1.0 - old[1] if old is not None else 1.0
+        return new if new is not None and 1.0 - new[1] <= (1.0 - gain) * left else old
+
+    best = fit(bases[:1], classes)
     if len(bases) > 1:
-        # the polynomial model only where its extra terms remove a good part of what the
-        # square one leaves (else they fit other errors: clipping, scatter, edges)
-        poly = fit(len(bases), classes)
-        left = 1.0 - best[1] if best is not None else 1.0
-        if poly is not None and 1.0 - poly[1] <= (1.0 - min_gain) * left:
-            best = poly
+        best = better(fit(bases, classes), best)
+    halo_px = 0.0
+    if model == "halo" and best is not None and best[1] >= min_explained:
+        # a glow only around a metal whose streaks were found (else the blurred mask fits
+        # a scan's own gradients: a tooth's dentin). Its width: each width's explained
+        # share on the classes fitted so far screens; those that could pass the gain gate
+        # are fitted with their rounds, and the one explaining most is kept (the shares
+        # are close, the labels less so)
+        few = np.flatnonzero(fit_mask)[::4]  # a quarter of the fitted pixels screen
+        base, k = best, best[4].ravel()[few]
+        cols = [b.ravel()[few] for b in bases]
+        for s in HALO_SIGMAS_PX:
+            h = halo_basis(metal, s, at=few)
+            screened = (None, _fit_columns(img.ravel()[few], cols + [h], k)[1])
+            if better(screened, base, HALO_MIN_GAIN) is not base:
+                h = halo_basis(metal, s)
+                halo = better(fit(list(bases) + [h], base[4]), base, HALO_MIN_GAIN)
+                if halo is not base and halo[1] > best[1]:
+                    best, halo_px = halo, s
     if best is None:
         return StreakCorrection(img, metal_pixels=n_metal, reason="fitted weight not positive")
-    weights, explained, weight, change = best
+    weights, explained, weight, change = best[:4]
     if explained < min_explained:
         return StreakCorrection(img, metal_pixels=n_metal, explained=float(explained),
                                 reason=f"explains only {explained:.1%} of the variance")
     max_change = float(np.abs(change[~metal]).max())
     return StreakCorrection(img + change, weight=float(weight), explained=float(explained),
                             metal_pixels=n_metal, max_change=max_change,
-                            weights=tuple(float(w) for w in weights))
+                            weights=tuple(float(w) for w in weights), halo_px=halo_px)
 
 
 def _nearest_level(image, levels, sigma):

@@ -196,22 +196,21 @@ class CorrectionParams(_Group):
 
     group = "corrections"
     streak_correction: bool = _param(True, "bool", "first remove the dark beam-hardening "
-                                     "streaks next to metal",
-                                     cli="--no-streak-correction")
+                                     "streaks next to metal", cli="--no-streak-correction")
     streak_sigma_px: float = _param(1.0, "float", "smoothing before pixels are classified for "
                                     "the streak fit", "px", low=0.0, high=10.0,
                                     vtk="StreakSigma")
     streak_margin_px: int = _param(3, "int", "pixels this close to the metal are left out of "
-                                   "the streak fit", "px", low=0, high=100,
-                                   vtk="StreakMargin")
+                                   "the streak fit", "px", low=0, high=100, vtk="StreakMargin")
     streak_rounds: int = _param(3, "int", "rounds of streak fit and re-classification",
                                 low=1, high=20)
     streak_min_explained: float = _param(0.05, "float", "a streak correction that removes "
                                          "less of the within-material variance is not "
                                          "applied", low=0.0, high=1.0)
-    streak_model: str = _param("polynomial", "choice", "streak model: metal path length L "
-                               "squared, or also L cubed and L times the other materials' "
-                               "path", choices=("square", "polynomial"), vtk="StreakModel")
+    streak_model: str = _param("halo", "choice", "streak model: metal path length L squared; "
+                               "polynomial: also L^3 and L times the other materials' path; "
+                               "halo: also a glow around the metal", choices=("square",
+                               "polynomial", "halo"), vtk="StreakModel")
     streak_min_gain: float = _param(0.2, "float", "polynomial model only where it removes this "
                                     "share of what the square one leaves", low=0.0, high=1.0)
     blur_correction: bool = _param(True, "bool", "take off the edge blur the first labelling "

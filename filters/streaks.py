@@ -15,7 +15,8 @@ class MetalStreakFilter(CTSegAlgorithm):
     Output: the image with the corrected values as its point scalars (named as the input's,
     float64), the input's values kept as an ``original`` point array, and field data
     ``streak_weight``, ``streak_explained`` (share of within-material variance removed)
-    and ``streak_max_change`` (0 when nothing was corrected). Connect the output where the
+    ``streak_max_change`` (0 when nothing was corrected) and ``streak_halo_px``, the width
+    of the glow taken off (0 when none). Connect the output where the
     later stages (density map, triangle gray, graph cut) take the image.
     Parameters: what ``correct_streaks`` reads (``ctseg params``): the levels group
     (which tells the materials apart), DensityFloor and DensitySaturation (which find the
@@ -43,6 +44,7 @@ class MetalStreakFilter(CTSegAlgorithm):
         pd.AddArray(_point_array(arr, "original"))
         pd.SetScalars(_point_array(fix.image, scalars.GetName() or "scalars"))
         for name, value in (("streak_weight", fix.weight), ("streak_explained", fix.explained),
-                            ("streak_max_change", fix.max_change)):
+                            ("streak_max_change", fix.max_change),
+                            ("streak_halo_px", fix.halo_px)):
             _field_array(out, name, float(value))
         self.UpdateProgress(1.0)

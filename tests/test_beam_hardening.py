@@ -4,8 +4,9 @@ import pytest
 from scipy import ndimage
 
 import ctseg.streak_basis as streak_basis
-from ctseg.beam_hardening import (correct_metal_streaks, fit_streak_weight, fit_streak_weights,
-                                   metal_streak_basis, streak_bases)
+from ctseg.beam_hardening import (HALO_SIGMAS_PX, correct_metal_streaks, fit_streak_weight,
+                                   fit_streak_weights, halo_basis, metal_streak_basis,
+                                   streak_bases)
 from ctseg.errors import InputError, ParameterError
 from ctseg.phantoms import make_phantom
 from ctseg.levels import flat_pixels
@@ -207,6 +208,48 @@ def test_simulated_multi_insert_plate_is_flattened_more_by_the_polynomial_model(
     new = correct_metal_streaks(img, levels, flat=flat, streak_model="polynomial")
     assert new.weight > 0 and new.explained > old.explained
     assert spread(new.image) < 0.8 * spread(old.image) < 0.8 * spread(img)
+
+
+def test_glow_around_the_metal_is_removed_by_the_halo_model():
+    # streaks plus a bright glow (the metal blurred by a Gaussian of 11.3 px, up to 40% of
+    # the plate's level), as scatter and glare leave around a clipped steel fastener: the
+    # path-length terms cannot make it, the halo model finds its width and removes it
+    truth, metal = plate_with_inserts()
+    plate = (truth > 0) & ~metal
+    sq = streak_bases(metal, plate, model="square")[0]
+    away = ~ndimage.binary_dilation(metal, iterations=3)
+    glow = halo_basis(metal, HALO_SIGMAS_PX[1])
+    rng = np.random.default_rng(4)
+    noise = rng.normal(0, 0.02, truth.shape)
+    clean = truth - 0.5 * sq / np.abs(sq[away]).max() + noise
+    seen = clean + 0.4 * glow / glow[away].max()
+    fit = ndimage.binary_erosion(plate, iterations=2) & away
+    poly = correct_metal_streaks(seen, [0.0, 1.0, 5.0], streak_model="polynomial")
+    halo = correct_metal_streaks(seen, [0.0, 1.0, 5.0], streak_model="halo")
+    assert poly.halo_px == 0.0 and halo.halo_px in HALO_SIGMAS_PX[:3]
+    assert len(halo.weights) == 4 and halo.weights[-1] < 0  # the glow taken off
+    err_poly = np.abs(poly.image - noise - truth)[fit].mean()
+    err_halo = np.abs(halo.image - noise - truth)[fit].mean()
+    assert err_halo < 0.5 * err_poly
+    # without a glow its term gains too little and the polynomial model's image stays
+    plain_poly = correct_metal_streaks(clean, [0.0, 1.0, 5.0], streak_model="polynomial")
+    plain_halo = correct_metal_streaks(clean, [0.0, 1.0, 5.0], streak_model="halo")
+    assert plain_halo.halo_px == 0.0
+    np.testing.assert_array_equal(plain_halo.image, plain_poly.image)
+
+
+def test_halo_basis_is_the_blurred_mask():
+    # independent reference: the full-resolution Gaussian of the mask
+    m = np.zeros((80, 90), bool)
+    m[30:44, 20:70] = True
+    for s in (4.0, 11.0, 20.0):
+        ref = ndimage.gaussian_filter(m.astype(float), s, mode="constant")
+        full = halo_basis(m, s)
+        assert np.abs(full - ref).max() < 0.03
+        at = np.arange(0, m.size, 7)
+        np.testing.assert_array_equal(halo_basis(m, s, at=at), full.ravel()[at])
+    with pytest.raises(ParameterError, match="sigma_px"):
+        halo_basis(m, 0.0)
 
 
 def test_bad_streak_model_is_refused():

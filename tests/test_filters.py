@@ -111,6 +111,7 @@ def test_stage_filters_chain_equals_segment_image(tmp_path):
     ref = ctseg.segment_image(img, n_sites=150)
     fd = streaks.GetOutput().GetFieldData()
     assert fd.GetArray("streak_weight").GetValue(0) == ref.diagnostics["streak_correction"]["weight"] > 0
+    assert fd.GetArray("streak_halo_px").GetValue(0) == ref.diagnostics["streak_correction"]["halo_px"]
     corrected = numpy_support.vtk_to_numpy(streaks.GetOutput().GetPointData().GetScalars())
     np.testing.assert_array_equal(corrected.reshape(img.shape), ref.corrected_image)
     original = numpy_support.vtk_to_numpy(streaks.GetOutput().GetPointData().GetArray("original"))
