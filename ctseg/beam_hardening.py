@@ -138,8 +138,6 @@ def correct_metal_streaks(image, levels, *, flat=None,
     when they remove ``streak_min_gain`` of what the square model leaves: on an 8-bit
     clipped steel fastener they fitted the clipping (0.33 -> 0.40 explained) and made a
     false fifth material.
-    The same fastener glows in the plate around it (scatter and crosstalk): the ``halo``
-    model takes that off (README, *Accuracy*, another simulator).
 
     Example
     -------
@@ -365,14 +363,16 @@ def correct_streaks_volume(volume, params=None, *, gray_scale, levels_255):
         Each slice's weight (0 where not corrected).
     probed : int
         Slices probed.
+    halo_px : list of float
+        Each slice's glow width (:class:`StreakCorrection`'s ``halo_px``; 0 where none).
 
     Example
     -------
     >>> vol = np.zeros((3, 16, 16)); vol[:, 6:10, 6:10] = 100.0
-    >>> out, weights, probed = correct_streaks_volume(vol, gray_scale=(0.0, 2.55),
-    ...                                               levels_255=[0.0, 255.0])
-    >>> probed, weights, bool(np.array_equal(out, vol))  # no streak: slices 1-2 spared
-    (1, [0.0, 0.0, 0.0], True)
+    >>> out, weights, probed, halo_px = correct_streaks_volume(vol, gray_scale=(0.0, 2.55),
+    ...                                                        levels_255=[0.0, 255.0])
+    >>> probed, weights, halo_px, bool(np.array_equal(out, vol))  # no streak: 1-2 spared
+    (1, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], True)
     """
     p = resolve(params)
     vol = np.asarray(volume, np.float64)
@@ -385,15 +385,15 @@ def correct_streaks_volume(volume, params=None, *, gray_scale, levels_255):
         if into_run % STREAK_PROBE_STEP == 0:
             probes.append(int(k))
     out = vol.copy()
-    weights = np.zeros(len(vol))
+    weights, halo_px = np.zeros(len(vol)), np.zeros(len(vol))
 
     def correct(k):
         fix = correct_streaks(vol[k], p, gray_scale=gray_scale, levels_255=levels_255)
-        out[k], weights[k] = fix.image, fix.weight
+        out[k], weights[k], halo_px[k] = fix.image, fix.weight, fix.halo_px
 
     for k in probes:
         correct(k)
     if np.any(weights[probes] > 0):
         for k in np.setdiff1d(np.flatnonzero(metal), probes):
             correct(int(k))
-    return out, [float(w) for w in weights], int(len(probes))
+    return out, [float(w) for w in weights], int(len(probes)), [float(h) for h in halo_px]

@@ -180,9 +180,9 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
 
     image = vol.astype(np.float64)
     scale, levels, pixel_sigma, _ = timed("levels", 0.0, volume_levels, image, p, 0)
-    streak_weights, streak_probed = [], 0
+    streak_weights, streak_probed, streak_halo_px = [], 0, []
     if p.streak_correction and len(levels) > 1:
-        image, streak_weights, streak_probed = timed(
+        image, streak_weights, streak_probed, streak_halo_px = timed(
             "streak_correction", 0.02, correct_streaks_volume, image, p, gray_scale=scale,
             levels_255=levels)
     n_sites, site_report = timed("site_budget", 0.04, n_sites_3d, image, p)
@@ -251,6 +251,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "element_quality": quality,
         "slivers_left": int(slivers),
         "streak_weights": streak_weights,
+        "streak_halo_px": streak_halo_px,
         "streak_slices_probed": streak_probed,
         "surfaces": [{"material": s.material, "triangles": int(len(s.triangles)),
                       "vertices": int(len(s.points)), "enclosed_volume": s.enclosed_volume,

@@ -269,7 +269,7 @@ def test_volume_probes_every_fourth_metal_slice_of_each_run():
     for k in (1, 4, 5, 6, 8, 9, 10, 11, 12, 13):  # runs of 1, 3 and 6 slices through metal
         vol[k, 6:10, 6:10] = 100.0
     assert STREAK_PROBE_STEP == 4
-    out, weights, probed = correct_streaks_volume(vol, gray_scale=(0.0, 2.55), levels_255=[0.0, 255.0])
+    out, weights, probed, _ = correct_streaks_volume(vol, gray_scale=(0.0, 2.55), levels_255=[0.0, 255.0])
     assert probed == 4  # slices 1, 4, 8 and 12
     assert weights == [0.0] * 14 and np.array_equal(out, vol)
 
@@ -286,11 +286,12 @@ def test_volume_streaks_corrected_on_every_metal_slice_as_slice_by_slice():
                          (make_part_3d(32, seed=1).image, False)):
         vol = np.asarray(vol, float)
         scale, levels, _, _ = volume_levels(vol, p, 0)
-        out, weights, probed = correct_streaks_volume(vol, p, gray_scale=scale, levels_255=levels)
+        out, weights, probed, halo_px = correct_streaks_volume(vol, p, gray_scale=scale, levels_255=levels)
         ref = [correct_streaks(vol[k], p, gray_scale=scale, levels_255=levels) for k in range(len(vol))]
         n_metal = int(metal_slices(vol, levels / scale[1] + scale[0], p.streak_sigma_px).sum())
         assert probed < n_metal
         assert (max(weights) > 0) == streaky
         # streaks: every slice as alone; none: the slices not probed had none either
         np.testing.assert_array_equal(weights, [f.weight for f in ref])
+        np.testing.assert_array_equal(halo_px, [f.halo_px for f in ref])
         np.testing.assert_array_equal(out, np.stack([f.image for f in ref]))
