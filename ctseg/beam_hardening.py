@@ -14,7 +14,7 @@ mask; w is fitted by least squares so that each material's flat pixels are as un
 possible, with the pixel classes re-drawn from the corrected image a few times.
 
 Several metal parts in a plate harden the rays through two inserts and the plate between
-them more than ``L^2`` says: the ``polynomial`` model (``streak_model``, the default) adds
+them more than ``L^2`` says: the ``polynomial`` model (``streak_model``) adds
 ``FBP(L^3)`` and ``FBP(L P)``, P the path through the other non-air materials (the
 second-order terms of the deficit in the total attenuation), each with its own weight, and
 is kept only where it leaves ``streak_min_gain`` less of the variance than the square
@@ -22,8 +22,9 @@ model alone (else its extra terms fit other errors: clipping, scatter, edges).
 
 Scatter and detector glare leave a smooth glow around a dense part, tens of pixels wide,
 that no path-length term makes: the ``halo`` model (the default) adds the metal mask
-blurred by a Gaussian, its width the one of :data:`HALO_SIGMAS_PX` that explains most, kept
-where it removes :data:`HALO_MIN_GAIN` of what the model without it leaves.
+blurred by a Gaussian (with all the polynomial terms), its width the one of
+:data:`HALO_SIGMAS_PX` that explains most, kept where it removes :data:`HALO_MIN_GAIN` of
+what the model kept without it leaves.
 """
 from dataclasses import dataclass
 
@@ -177,7 +178,7 @@ def correct_metal_streaks(image, levels, *, flat=None,
 
     def fit(bs, classes):
         """Fit the bases ``bs`` and re-classify ``rounds`` times: (weights, explained,
-        weight, change, classes, bs), or None when the weight is not positive."""
+        weight, change, classes), or None when the weight is not positive."""
         cols = [b[fit_mask] for b in bs] if len(bs) > 1 else None
         for _ in range(rounds):
             # weight: that of FBP(L^2) closest to the whole correction (the square model's
@@ -194,7 +195,7 @@ def correct_metal_streaks(image, levels, *, flat=None,
             if np.array_equal(new_classes, classes):  # a fixed point: later rounds repeat it
                 break
             classes = new_classes
-        return weights, explained, weight, change, classes, bs
+        return weights, explained, weight, change, classes
 
     def better(new, old, gain=min_gain):
         """``new`` where its extra terms remove ``gain`` of what ``old`` leaves (else they
@@ -207,11 +208,10 @@ def correct_metal_streaks(image, levels, *, flat=None,
         best = better(fit(bases, classes), best)
     halo_px = 0.0
     if model == "halo" and best is not None and best[1] >= min_explained:
-        # a glow only around a metal whose streaks were found (else the blurred mask fits
-        # a scan's own gradients: a tooth's dentin). Its width: each width's explained
-        # share on the classes fitted so far screens; those that could pass the gain gate
-        # are fitted with their rounds, and the one explaining most is kept (the shares
-        # are close, the labels less so)
+        # a glow only around a metal whose streaks were found (else it fits a scan's own
+        # gradients: a tooth's dentin), with every polynomial term, even if they failed
+        # their gate (README: the glow alone did worse). Widths are screened on the classes
+        # fitted so far; those that may pass are fitted with rounds; the best is kept
         few = np.flatnonzero(fit_mask)[::4]  # a quarter of the fitted pixels screen
         base, k = best, best[4].ravel()[few]
         cols = [b.ravel()[few] for b in bases]

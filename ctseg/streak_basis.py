@@ -64,8 +64,9 @@ def metal_streak_basis(metal, n_angles=None):
 
 
 STREAK_MODELS = CorrectionParams.spec("streak_model").choices
-"""Sinogram terms of the artifact model: ``square`` is ``L^2`` alone; ``polynomial`` adds
-``L^3`` and ``L * P`` (P the path through the other, non-air materials)."""
+"""Terms of the artifact model: ``square`` is ``L^2`` alone; ``polynomial`` adds ``L^3``
+and ``L * P`` (P the path through the other, non-air materials); ``halo`` adds a glow
+around the metal (:func:`halo_basis`) to the polynomial terms."""
 
 
 def _coarse(m, step):
