@@ -53,6 +53,14 @@ CASES = [
                                                 ring=0.006)),
     ("inserts Al: Ti x4, 160 kV, 256 px", dict(part="inserts", size=256, seed=9,
                                                metals=("titanium",), kvp=160.0)),
+    # made after the halo streak model was chosen on the clipped steel fastener above:
+    # the same part at other sizes and another seed
+    ("composite: steel, clipped, seed 12", dict(part="composite", size=512, seed=12,
+                                                fastener="steel", clip8=True)),
+    ("composite: steel, clipped, 1024 px", dict(part="composite", size=1024, seed=5,
+                                                fastener="steel", clip8=True)),
+    ("composite: steel, clipped, 256 px", dict(part="composite", size=256, seed=5,
+                                               fastener="steel", clip8=True)),
 ]
 
 
