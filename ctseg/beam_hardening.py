@@ -213,11 +213,11 @@ def correct_metal_streaks(image, levels, *, flat=None,
         # their gate (README: the glow alone did worse). Widths are screened on the classes
         # fitted so far; those that may pass are fitted with rounds; the best is kept
         few = np.flatnonzero(fit_mask)[::4]  # a quarter of the fitted pixels screen
-        base, k = best, best[4].ravel()[few]
+        base, k, sample = best, best[4].ravel()[few], values[::4]
         cols = [b.ravel()[few] for b in bases]
         for s in HALO_SIGMAS_PX:
             h = halo_basis(metal, s, at=few)
-            screened = (None, _fit_columns(img.ravel()[few], cols + [h], k)[1])
+            screened = (None, _fit_columns(sample, cols + [h], k)[1])
             if better(screened, base, HALO_MIN_GAIN) is not base:
                 h = halo_basis(metal, s)
                 halo = better(fit(list(bases) + [h], base[4]), base, HALO_MIN_GAIN)

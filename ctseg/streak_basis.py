@@ -79,14 +79,17 @@ def _coarse(m, step):
     return pad.reshape(ry, step, rx, step).mean(axis=(1, 3))
 
 
-def _refine(basis, shape, step):
-    """Linear interpolation of a coarse map back onto the full ``shape``."""
+def _refine(basis, shape, step, at=None):
+    """Linear interpolation of a coarse map back onto the full ``shape`` (or onto the
+    pixels of flat indices ``at`` only)."""
+    if at is not None:
+        rows, cols = np.unravel_index(np.asarray(at, np.int64), shape)
+    else:
+        rows, cols = np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij")
     if step == 1:
-        return basis
+        return basis[rows, cols] if at is not None else basis
     # coarse pixel centres sit at (i + 0.5) * step - 0.5 in fine pixels
-    yy = (np.arange(shape[0]) + 0.5) / step - 0.5
-    xx = (np.arange(shape[1]) + 0.5) / step - 0.5
-    grid = np.meshgrid(yy, xx, indexing="ij")
+    grid = [(rows + 0.5) / step - 0.5, (cols + 0.5) / step - 0.5]
     return ndimage.map_coordinates(basis, grid, order=1, mode="nearest")
 
 
@@ -193,12 +196,7 @@ def halo_basis(metal, sigma_px, at=None):
     sigma = check_number(sigma_px, "sigma_px", low=0.0, low_open=True)
     step = max(1, int(sigma // 2))  # linear interpolation is exact enough over sd / 2
     coarse = ndimage.gaussian_filter(_coarse(m, step), sigma / step, mode="constant")
-    if at is None:
-        return _refine(coarse, m.shape, step)
-    rows, cols = np.unravel_index(np.asarray(at, np.int64), m.shape)
-    # the coordinates of _refine's grid at those pixels
-    return ndimage.map_coordinates(coarse, [(rows + 0.5) / step - 0.5, (cols + 0.5) / step - 0.5],
-                                   order=1, mode="nearest")
+    return _refine(coarse, m.shape, step, at)
 
 
 def fit_streak_weights(image, bases, classes, mask):
