@@ -3,6 +3,7 @@ and the flat pixels and voxels (away from edges) that measure the material level
 import numpy as np
 from scipy import ndimage
 
+from . import _ramp, _threads
 from ._validate import as_image, as_volume, check_spacing
 from .errors import InputError
 from .params import AUTO, DEFAULTS, check
@@ -284,9 +285,6 @@ def flat_voxels(stack, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAU
         flat[k], noise[k], full[k] = _flat_and_scale(sl, floor, saturation)
     if not across or len(vol) < 3:
         return flat
-    up, down = smooth[2:] - smooth[1:-1], smooth[1:-1] - smooth[:-2]
-    step = np.minimum(np.abs(up), np.abs(down))
-    noise_k, full_k = noise[1:-1, None, None], full[1:-1, None, None]
-    ramp = (np.sign(up) == np.sign(down)) & (up != 0) & (step - noise_k >= 0.5 * (full_k - noise_k))
-    flat[1:-1] &= ~ramp
+    _threads.pick(_ramp.clear_ramps, _ramp.clear_ramps_parallel)(
+        np.ascontiguousarray(smooth), noise, full, flat)
     return flat

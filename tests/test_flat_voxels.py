@@ -72,3 +72,31 @@ def test_a_stack_must_be_3d():
     from ctseg.errors import InputError
     with pytest.raises(InputError, match="3D"):
         flat_voxels(np.zeros((4, 4)))
+
+
+def _ramps_numpy(smooth, noise, full):
+    """The ramp rule written with numpy arrays (the slow reference of the compiled pass)."""
+    up, down = smooth[2:] - smooth[1:-1], smooth[1:-1] - smooth[:-2]
+    step = np.minimum(np.abs(up), np.abs(down))
+    noise_k, full_k = noise[1:-1, None, None], full[1:-1, None, None]
+    return (np.sign(up) == np.sign(down)) & (up != 0) & (step - noise_k >= 0.5 * (full_k - noise_k))
+
+
+@pytest.mark.parametrize("quantized", [False, True])
+def test_the_compiled_ramp_pass_is_the_numpy_rule(quantized):
+    from ctseg import _ramp
+
+    vol, _ = _upright_tube()
+    smooth = np.stack([gaussian_filter(sl, 1.0) for sl in vol]) / 9000.0
+    if quantized:  # equal grays in consecutive slices: zero steps of either sign
+        smooth = np.round(smooth * 20) / 20
+    rng = np.random.default_rng(2)
+    noise, full = rng.uniform(0, 0.01, len(vol)), rng.uniform(0.02, 0.2, len(vol))
+    full[3] = np.inf  # a slice without gradient
+    expected = np.ones(vol.shape, bool)
+    expected[1:-1] = ~_ramps_numpy(smooth, noise, full)
+    assert 0 < (~expected).sum() < expected.size
+    for kernel in (_ramp.clear_ramps, _ramp.clear_ramps_parallel):
+        flat = np.ones(vol.shape, bool)
+        kernel(smooth, noise, full, flat)
+        assert np.array_equal(flat, expected)
