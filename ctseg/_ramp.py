@@ -4,7 +4,6 @@ the slices, in one pass over the stack instead of a dozen numpy temporaries of i
 
 Private: :func:`ctseg.density.flat_voxels` is the entry point.
 """
-import numpy as np
 from numba import njit, prange
 
 
