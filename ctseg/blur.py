@@ -15,6 +15,8 @@ once more with those grays.
 import numpy as np
 from scipy import ndimage
 
+from . import _threads
+from ._level_changes import level_changes, level_changes_parallel
 from ._threads import thread_map
 from ._validate import as_image, as_volume, check_number
 from .errors import ParameterError
@@ -137,8 +139,9 @@ def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_
         raise ParameterError(f"levels_image: shape {lev.shape} differs from the image's {img.shape}")
     band_px = check_number(band_px, "band_px", low=1, integer=True)
     max_px = check("blur_max_px", blur_max_px)
-    change = (ndimage.maximum_filter(lev, 3, mode="nearest")
-              - ndimage.minimum_filter(lev, 3, mode="nearest")) > 0
+    change = np.empty(lev.shape, bool)
+    _threads.pick(level_changes, level_changes_parallel)(
+        np.ascontiguousarray(lev).reshape((-1,) + lev.shape[-2:]), change.reshape((-1,) + lev.shape[-2:]))
     if not change.any():
         return 0.0
     band = ndimage.binary_dilation(change, iterations=band_px)

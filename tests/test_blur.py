@@ -172,3 +172,21 @@ def test_amplified_correction_explains_a_thin_gap():
     np.testing.assert_allclose(plain[gap], gray[gap], atol=1e-6)  # nothing predicted there
     np.testing.assert_allclose(fixed[gap], 200.0 + (gray[gap] - 200.0) / 0.8, atol=1e-6)
     assert np.all(np.abs(fixed[gap]) < 15)
+
+
+@pytest.mark.parametrize("shape", [(1, 30, 40), (5, 9, 11), (16, 20, 24)])
+def test_level_changes_are_the_max_minus_min_filter_rule(shape):
+    # the compiled neighbourhood test against the filters it replaces (the slow reference)
+    from ctseg import _level_changes
+
+    rng = np.random.default_rng(len(shape) + shape[0])
+    lev = np.where(rng.uniform(size=shape) < 0.93, 1.0, rng.integers(0, 3, shape).astype(float))
+    lev[lev == 0] = -0.0  # a signed zero is no change
+    lev[:, :2, :2] = 0.0
+    expected = (ndimage.maximum_filter(lev, 3, mode="nearest")
+                - ndimage.minimum_filter(lev, 3, mode="nearest")) > 0
+    assert 0 < expected.sum() < expected.size
+    for kernel in (_level_changes.level_changes, _level_changes.level_changes_parallel):
+        out = np.empty(shape, bool)
+        kernel(lev, out)
+        assert np.array_equal(out, expected)
