@@ -28,7 +28,7 @@ class GraphCapacities:
 
 def graphcut_capacities(gray, edges, centroids, seeds=None, theta_255=DEFAULTS.theta_255,
                         lam=DEFAULTS.lam, beta=DEFAULTS.beta, eps_255=DEFAULTS.eps_255,
-                        edge_length=None):
+                        edge_length=None, edge_distance=None):
     """Build the t-link and n-link capacities of the paper's eqs. (6)-(9).
 
     Parameters
@@ -49,6 +49,9 @@ def graphcut_capacities(gray, edges, centroids, seeds=None, theta_255=DEFAULTS.t
         Added to |f(tm) - f(tn)| so that equal neighbours get a finite n-link.
     edge_length : (k,) array_like, optional
         If given, n-links are multiplied by the shared edge length (an option, not the paper's).
+    edge_distance : (k,) array_like, optional
+        d(tm, tn) of every edge, if known (a caller that cuts parts of one graph many times
+        computes them once); the centroids are then not read.
 
     Returns
     -------
@@ -91,9 +94,9 @@ def graphcut_capacities(gray, edges, centroids, seeds=None, theta_255=DEFAULTS.t
     src = np.where(free, 1.0 - d0 / tot, 0.0)
     snk = np.where(free, 1.0 - d1 / tot, 0.0)
 
-    c = np.asarray(centroids, dtype=np.float64)
     if len(edges):
-        d = np.linalg.norm(c[edges[:, 0]] - c[edges[:, 1]], axis=1)
+        d = (edge_distances(centroids, edges) if edge_distance is None
+             else np.asarray(edge_distance, dtype=np.float64))
         dbar = d.mean()
         dist_term = d / (d + dbar) if dbar > 0 else np.zeros_like(d)
         w = lam * (1.0 / (np.abs(f[edges[:, 0]] - f[edges[:, 1]]) + eps) + beta * dist_term)
@@ -108,8 +111,20 @@ def graphcut_capacities(gray, edges, centroids, seeds=None, theta_255=DEFAULTS.t
                            inf_cap=inf_cap, seeds=(s0, s1))
 
 
+def edge_distances(centroids, edges):
+    """d(tm, tn): the Euclidean distance between the barycentres of each edge's elements."""
+    c = np.asarray(centroids, dtype=np.float64)
+    return np.linalg.norm(c[edges[:, 0]] - c[edges[:, 1]], axis=1)
+
+
 def graphcut_split(gray, edges, centroids, **params):
     """Split a set of triangles in two by the minimum s-t cut (paper 6.1).
+
+    The elements tied to s0 (its seed set, infinite source capacity) are merged into the
+    source before the max-flow: an edge from one of them becomes a source t-link of its
+    other element, an edge between two of them is never cut. The minimum cut is the same;
+    the graph is only what is not already decided, a small part of a component that is
+    mostly one material (the recursive cut splits such components many times).
 
     Parameters
     ----------
@@ -136,11 +151,23 @@ def graphcut_split(gray, edges, centroids, **params):
     """
     caps = graphcut_capacities(gray, edges, centroids, **params)
     m = len(caps.source_cap)
-    g = maxflow.Graph[float](m, len(caps.edges))
-    nodes = g.add_nodes(m)
-    if len(caps.edges):
-        g.add_edges(nodes[caps.edges[:, 0]], nodes[caps.edges[:, 1]], caps.edge_cap, caps.edge_cap)
-    g.add_grid_tedges(nodes, caps.source_cap, caps.sink_cap)
+    untied = caps.source_cap < caps.inf_cap
+    n = int(untied.sum())
+    index = np.cumsum(untied) - 1
+    src, snk = caps.source_cap[untied], caps.sink_cap[untied]
+    e, w = caps.edges, caps.edge_cap
+    if len(e):
+        ua, ub = untied[e[:, 0]], untied[e[:, 1]]
+        one = ua != ub
+        src = src + np.bincount(index[np.where(ua[one], e[one, 0], e[one, 1])], w[one], n)
+        both = ua & ub
+        e, w = index[e[both]], w[both]
+    g = maxflow.Graph[float](n, len(e))
+    nodes = g.add_nodes(n)
+    if len(e):
+        g.add_edges(nodes[e[:, 0]], nodes[e[:, 1]], w, w)
+    g.add_grid_tedges(nodes, src, snk)
     flow = g.maxflow()
-    labels = g.get_grid_segments(nodes).astype(np.int8)
+    labels = np.zeros(m, np.int8)
+    labels[untied] = g.get_grid_segments(nodes)
     return labels, float(flow)

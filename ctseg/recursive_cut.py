@@ -6,7 +6,7 @@ import numpy as np
 
 from .errors import ParameterError
 from .graph import connected_pieces, nearest_level_core
-from .graphcut import graphcut_split
+from .graphcut import edge_distances, graphcut_split
 from .levels import dominant_spread, material_modes
 from .params import AUTO, DEFAULTS, check
 from .partial_volume import (label_fragmented_layers, label_partial_volume_leaves,
@@ -105,6 +105,7 @@ def _recursive_split(f, area, adjacency, centroids, interior, edges, means, min_
     stack = [(np.arange(m), np.arange(len(adjacency)), 0)]
     calls = deepest = 0
     in_comp = np.full(m, -1, np.int64)
+    distance = edge_distances(centroids, adjacency)  # each cut reads its edges' share
     while stack:
         comp, rows, depth = stack.pop()
         deepest = max(deepest, depth)
@@ -131,8 +132,8 @@ def _recursive_split(f, area, adjacency, centroids, interior, edges, means, min_
         in_comp[comp] = np.arange(len(comp))
         local = in_comp[adjacency[rows]]
         el = None if edge_length is None else edge_length[rows]
-        labels, _ = graphcut_split(f[comp], local, centroids[comp],
-                                   seeds=(in_comp[s0], in_comp[s1]), edge_length=el, **cut_params)
+        labels, _ = graphcut_split(f[comp], local, None, seeds=(in_comp[s0], in_comp[s1]),
+                                   edge_length=el, edge_distance=distance[rows], **cut_params)
         calls += 1
         # each side goes on as its connected pieces: a piece cut off far from the rest of
         # its side (a partial-volume triangle whose gray matches that side) is judged alone;

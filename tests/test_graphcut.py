@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from ctseg.errors import ParameterError
-from ctseg.graphcut import graphcut_capacities, graphcut_split
+from ctseg.graphcut import edge_distances, graphcut_capacities, graphcut_split
 from oracles import cut_energy
 
 
@@ -120,3 +120,42 @@ def test_bad_seeds():
         graphcut_split(gray, edges, cent, seeds=(1, 1))
     with pytest.raises(ParameterError):
         graphcut_split(gray, edges, cent, seeds=(0, 9))
+
+
+def _full_graph_cut(caps):
+    """The max-flow of every element and edge, none merged into a terminal (the graph
+    graphcut_split solved before it merged the elements tied to s0 into the source)."""
+    import maxflow
+
+    m = len(caps.source_cap)
+    g = maxflow.Graph[float](m, len(caps.edges))
+    nodes = g.add_nodes(m)
+    g.add_edges(nodes[caps.edges[:, 0]], nodes[caps.edges[:, 1]], caps.edge_cap, caps.edge_cap)
+    g.add_grid_tedges(nodes, caps.source_cap, caps.sink_cap)
+    flow = g.maxflow()
+    return g.get_grid_segments(nodes).astype(np.int8), flow
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_merging_the_source_seed_set_keeps_the_cut(seed):
+    # a noisy dark grid with bright and middle-gray blobs: most elements are tied to s0
+    rng = np.random.default_rng(seed)
+    n = 40
+    yy, xx = np.mgrid[0:n, 0:n]
+    gray = rng.normal(20.0, 4.0, (n, n))
+    for _ in range(6):
+        cy, cx, r = rng.uniform(4, n - 4), rng.uniform(4, n - 4), rng.uniform(1.5, 4.0)
+        gray[(yy - cy) ** 2 + (xx - cx) ** 2 < r * r] = rng.choice([120.0, 230.0])
+    ids = np.arange(n * n).reshape(n, n)
+    edges = np.concatenate([np.column_stack([ids[:, :-1].ravel(), ids[:, 1:].ravel()]),
+                            np.column_stack([ids[:-1].ravel(), ids[1:].ravel()])])
+    cent = np.column_stack([xx.ravel(), yy.ravel()]).astype(float)
+    caps = graphcut_capacities(gray.ravel(), edges, cent)
+    assert np.mean(caps.source_cap == caps.inf_cap) > 0.5
+    expected, expected_flow = _full_graph_cut(caps)
+    labels, flow = graphcut_split(gray.ravel(), edges, cent)
+    assert np.array_equal(labels, expected)
+    assert np.isclose(flow, expected_flow, rtol=1e-9)
+    # the distances given instead of the centroids: the same capacities
+    given = graphcut_capacities(gray.ravel(), edges, None, edge_distance=edge_distances(cent, edges))
+    assert np.array_equal(given.edge_cap, caps.edge_cap)
