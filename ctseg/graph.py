@@ -1,8 +1,8 @@
 """Element-graph helpers shared by the labelling stages: an element is a triangle or a
 tetrahedron, and the graph joins elements that share an edge (2D) or a face (3D)."""
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+
+from ._components import components
 
 
 def neighbour_lists(pairs, n):
@@ -42,7 +42,8 @@ def connected_pieces(pairs, n):
     -------
     n_pieces : int
     piece : (n,) int ndarray
-        Component of every node (scipy's numbering).
+        Component of every node, numbered in the order of each component's smallest
+        node (as scipy.sparse.csgraph.connected_components numbers them).
 
     Example
     -------
@@ -50,8 +51,9 @@ def connected_pieces(pairs, n):
     3
     """
     pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    return connected_components(graph, directed=False)
+    if len(pairs) and (pairs.min() < 0 or pairs.max() >= n):
+        raise ValueError(f"connected_pieces: node indices must lie in [0, {n - 1}]")
+    return components(np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1]), int(n))
 
 
 def core_bounds(levels):
