@@ -363,35 +363,3 @@ def _record(P, nz, ny, nx, t0, start, voxel, overlap):
         count += n
         start[t + 1] = count
     return m
-
-
-@njit(cache=True)
-def _row_sums(start, voxel, overlap, img):
-    """Per tetrahedron (compressed rows of :func:`_record`): the overlap volume and the
-    volume x gray of ``img`` (flat; the volume alone when empty), summed in the order
-    :func:`_overlaps` sums them."""
-    m = start.shape[0] - 1
-    vol = np.zeros(m)
-    w = np.zeros(m)
-    for t in range(m):
-        for q in range(start[t], start[t + 1]):
-            a = overlap[q]
-            vol[t] += a
-            if img.shape[0] > 0:
-                w[t] += a * img[voxel[q]]
-    return vol, w
-
-
-@njit(cache=True)
-def _column_sums(start, voxel, overlap, values, n):
-    """Per voxel (of ``n``): the overlap volume and the volume x value of the tetrahedra,
-    summed in the order :func:`_overlaps` sums them."""
-    vol = np.zeros(n)
-    w = np.zeros(n)
-    for t in range(start.shape[0] - 1):
-        for q in range(start[t], start[t + 1]):
-            c = voxel[q]
-            a = overlap[q]
-            vol[c] += a
-            w[c] += a * values[t]
-    return vol, w

@@ -5,7 +5,9 @@ import numbers
 import numpy as np
 
 from ._overlap_rows import overlap_rows
-from ._tet_clip import _column_sums, _overlaps, _row_sums
+from . import _threads
+from ._overlap_sums import column_sums, row_sums, row_sums_parallel
+from ._tet_clip import _overlaps
 from ._validate import as_volume, check_spacing
 from .errors import InputError, ParameterError
 
@@ -258,6 +260,11 @@ def voxel_overlaps(points, tetrahedra, shape, spacing=(1.0, 1.0, 1.0)):
     return VoxelOverlaps(points, tetrahedra, shape, spacing).rows()
 
 
+def _row_sums():
+    """The per-tetrahedron sums, threaded where threads are allowed (the same bits)."""
+    return _threads.pick(row_sums, row_sums_parallel)
+
+
 def _expected_cells(P):
     """Expected number of unit cells a tetrahedron (m, 4, 3) meets at a random offset:
     the volume of its Minkowski sum with the cell, ``V + sum_i A_i + sum_i L_i + 1``
@@ -321,7 +328,7 @@ class VoxelOverlaps:
         self.start, self.voxel, self.overlap = overlap_rows(P, dims, _expected_cells(P))
         if self.voxel is None:
             _outgrew(-1 - self.start)
-        self.tet_volume = _row_sums(self.start, self.voxel, self.overlap, np.zeros(0))[0]
+        self.tet_volume = _row_sums()(self.start, self.voxel, self.overlap, np.zeros(0))[0]
 
     @property
     def n_tetrahedra(self):
@@ -357,7 +364,7 @@ class VoxelOverlaps:
         if vol.shape != self.shape:
             raise InputError(f"volume: shape {vol.shape}, the overlaps are of {self.shape}")
         _check_filled(self.tet_volume)
-        return np.divide(*_row_sums(self.start, self.voxel, self.overlap,
+        return np.divide(*_row_sums()(self.start, self.voxel, self.overlap,
                                     np.ascontiguousarray(vol.ravel()))[::-1])
 
     def voxel_mean(self, values):
@@ -369,7 +376,7 @@ class VoxelOverlaps:
             Not one finite value per tetrahedron.
         """
         vals = _check_values(values, self.n_tetrahedra)
-        covered, weighted = _column_sums(self.start, self.voxel, self.overlap,
+        covered, weighted = column_sums(self.start, self.voxel, self.overlap,
                                          np.ascontiguousarray(vals), int(np.prod(self.shape)))
         mean = np.divide(weighted, covered, out=np.zeros_like(weighted), where=covered > 0)
         return mean.reshape(self.shape), covered.reshape(self.shape)
