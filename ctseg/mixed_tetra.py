@@ -33,8 +33,14 @@ def voxel_noise(volume):
     """Robust noise scale of a volume: the median absolute deviation of differences of
     neighbouring voxels along each axis, as :func:`ctseg.intensity.estimate_noise` in 2D."""
     v = np.asarray(volume, float)
-    d = np.concatenate([np.diff(v, axis=a).ravel() for a in range(v.ndim)])
-    # in place: a median needs no order, and the copies cost more than the medians (256^3)
+    # the differences written into one buffer and the medians taken in place: a median
+    # needs no order, and the copies cost more than the medians (256^3)
+    d = np.empty(sum(v.size - v.size // n for n in v.shape))
+    pos = 0
+    for a, n in enumerate(v.shape):
+        lo, hi = (v[(slice(None),) * a + (s,)] for s in (slice(None, -1), slice(1, None)))
+        np.subtract(hi, lo, out=d[pos:pos + lo.size].reshape(lo.shape))
+        pos += lo.size
     centre = np.median(d, overwrite_input=True)
     np.abs(np.subtract(d, centre, out=d), out=d)
     return float(1.4826 * np.median(d, overwrite_input=True) / np.sqrt(2.0))
