@@ -3,7 +3,7 @@ and the flat pixels and voxels (away from edges) that measure the material level
 import numpy as np
 from scipy import ndimage
 
-from . import _ramp, _threads
+from . import _gradient, _ramp, _threads
 from ._validate import as_image, as_volume, check_spacing
 from .errors import InputError
 from .params import AUTO, DEFAULTS, check
@@ -183,8 +183,9 @@ def density_volume(volume, spacing=(1.0, 1.0, 1.0), density_sigma_px=DEFAULTS.de
     vol = (vol - vol.min()) / span
     sigma_zyx = sigma * sp.min() / sp[::-1]  # voxels along z, y, x
     smooth = ndimage.gaussian_filter(vol, tuple(sigma_zyx), mode="nearest") if sigma > 0 else vol
-    gz, gy, gx = np.gradient(smooth, sp[2], sp[1], sp[0])
-    mag = np.sqrt(gx * gx + gy * gy + gz * gz)
+    mag = np.empty(smooth.shape)
+    _threads.pick(_gradient.gradient_magnitude, _gradient.gradient_magnitude_parallel)(
+        np.ascontiguousarray(smooth), mag, float(sp[2]), float(sp[1]), float(sp[0]))
     size = tuple(2 * int(np.ceil(max(s, 0.5))) + 1 for s in sigma_zyx)
     return _rho_from_gradient(mag, floor, saturation, ridge, size)
 

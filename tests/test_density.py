@@ -54,3 +54,18 @@ def test_ridge_keeps_the_peak_on_the_edge_and_narrows_the_band():
     row = 15
     assert np.argmax(ridge[row]) in (19, 20) and ridge[row].max() > 0.99
     assert np.sum(ridge[row] > 0.5) < np.sum(flat_top[row] > 0.5)
+
+
+@pytest.mark.parametrize("shape, spacing", [((2, 2, 2), (1.0, 1.0, 1.0)), ((3, 5, 7), (0.3, 0.1, 0.1)),
+                                            ((12, 9, 4), (1.5, 0.5, 0.7))])
+def test_compiled_gradient_magnitude_is_numpys(shape, spacing):
+    # the one-pass kernel of density_volume against numpy.gradient (the slow reference)
+    from ctseg import _gradient
+
+    f = np.random.default_rng(len(shape) * shape[0]).normal(size=shape)
+    gz, gy, gx = np.gradient(f, *spacing)
+    expected = np.sqrt(gx * gx + gy * gy + gz * gz)
+    for kernel in (_gradient.gradient_magnitude, _gradient.gradient_magnitude_parallel):
+        out = np.empty(shape)
+        kernel(f, out, *spacing)
+        assert np.array_equal(out, expected)
