@@ -16,6 +16,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
+from . import _threads
+
 # the faces of tetrahedron (0, 1, 2, 3), as in ctseg.tetrahedra
 _FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 
@@ -145,7 +147,8 @@ def local_delaunay(old, new, tets, moved, box, options, flat_rel, spheres=None):
     if not len(moved):
         return np.ones(len(tets), bool), np.zeros((0, 4), np.int64)
     centre, radius = circumspheres(old, tets) if spheres is None else spheres
-    dist = cKDTree(new[moved]).query(centre)[0]
+    # every centre against the moved sites, on all cores (each query its own)
+    dist = cKDTree(new[moved]).query(centre, workers=_threads.workers())[0]
     is_moved = np.zeros(len(new), bool)
     is_moved[moved] = True
     cavity = (dist <= radius * (1.0 + _SPHERE_MARGIN)) | is_moved[tets].any(axis=1)

@@ -33,3 +33,9 @@ def thread_map(fn, items):
         return [fn(x) for x in items]
     with ThreadPoolExecutor(n) as pool:
         return list(pool.map(fn, items))
+
+
+def workers():
+    """How many threads a library call that takes a ``workers`` count may use (scipy's
+    cKDTree queries): numba's where threads are :data:`enabled`, else 1."""
+    return numba.get_num_threads() if enabled else 1
