@@ -82,26 +82,25 @@ def element_measures(points, elements):
 
 
 class _Quality:
-    """What a move must keep of each element: at least :data:`MIN_AREA_RATIO` of its
-    measure, and (tetrahedra, ``min_dihedral_deg`` > 0) a smallest dihedral angle of at
-    least ``min_dihedral_deg`` or, for an element already below it, of its own."""
+    """What a move must keep of each element ``which`` (the others are never asked): at
+    least :data:`MIN_AREA_RATIO` of its measure, and (tetrahedra, ``min_dihedral_deg`` > 0)
+    a smallest dihedral angle of at least ``min_dihedral_deg`` or, below it, of its own."""
 
-    def __init__(self, points, elements, min_dihedral_deg):
-        self.elements = elements
-        self.measure0 = element_measures(points, elements)
+    def __init__(self, points, elements, min_dihedral_deg, which):
+        self.measure0 = np.full(len(elements), np.nan)
+        self.measure0[which] = element_measures(points, elements[which])
         self.angle0 = None
         if points.shape[1] == 3 and min_dihedral_deg:
-            self.angle0 = np.minimum(dihedral_angles(points, elements).min(axis=1),
-                                     min_dihedral_deg)
+            self.angle0 = np.full(len(elements), np.nan)
+            self.angle0[which] = np.minimum(dihedral_angles(points, elements[which]).min(axis=1),
+                                            min_dihedral_deg)
 
-    def bad(self, points, elements=None, which=None):
-        """Whether each element (``elements``, default all; ``which`` their indices in the
-        mesh) with vertices at ``points`` breaks the rule."""
-        el = self.elements if elements is None else elements
-        which = slice(None) if which is None else which
-        bad = element_measures(points, el) < MIN_AREA_RATIO * self.measure0[which]
+    def bad(self, points, elements, which):
+        """Whether each element (``elements``, ``which`` their indices in the mesh) with
+        vertices at ``points`` breaks the rule."""
+        bad = element_measures(points, elements) < MIN_AREA_RATIO * self.measure0[which]
         if self.angle0 is not None:
-            bad |= dihedral_angles(points, el).min(axis=1) < self.angle0[which]
+            bad |= dihedral_angles(points, elements).min(axis=1) < self.angle0[which]
         return bad
 
 
@@ -276,10 +275,13 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
     if len(cand) == 0:
         return moved, 0
     # each vertex alone: no incident element inverted or squashed, else half the shift
-    quality = _Quality(pts, tri, min_dihedral_deg)
     vt_v, vt_t = tri.ravel(), np.repeat(np.arange(len(tri)), dim + 1)
     inc_t = vt_t[np.argsort(vt_v, kind="stable")]
     starts = np.concatenate([[0], np.cumsum(np.bincount(vt_v, minlength=n))])
+    near = np.zeros(n, bool)  # the elements a move can change: the rule is checked on those
+    near[cand] = True
+    reach_t = np.flatnonzero(near[tri].any(axis=1))
+    quality = _Quality(pts, tri, min_dihedral_deg, reach_t)
     accepted = np.zeros(len(cand), bool)
     for _ in range(BACKTRACK_STEPS + 1):
         todo = np.flatnonzero(~accepted & (shift != 0))
@@ -294,8 +296,8 @@ def place_boundary_vertices(points, triangles, material, image, levels, *,
     # together: undo the moves around any element the combination spoils
     active = np.ones(len(cand), bool)
     for _ in range(len(cand) + 1):
-        bad = quality.bad(moved)
-        if not bad.any():
+        bad = reach_t[quality.bad(moved, tri[reach_t], reach_t)]
+        if not len(bad):
             break
         spoiled = np.isin(cand, np.unique(tri[bad])) & active
         if not spoiled.any():  # an element bad before any move: not ours to fix
