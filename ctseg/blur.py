@@ -130,8 +130,8 @@ def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_
         If the shapes differ or ``band_px``, ``blur_max_px`` are out of range.
     """
     if np.ndim(image) == 3:  # a volume: the same fit with a 3D Gaussian (voxel units)
-        img = as_volume(image).astype(np.float64)
-        lev = as_volume(levels_image, "levels_image").astype(np.float64)
+        img = as_volume(image).astype(np.float64, copy=False)
+        lev = as_volume(levels_image, "levels_image").astype(np.float64, copy=False)
     else:
         img = as_image(image)
         lev = as_image(levels_image, "levels_image")
@@ -323,7 +323,7 @@ def blur_corrected_gray_3d(gray, points, tetrahedra, level, volume, spacing=(1.0
     >>> bool(np.allclose(fixed, level))
     True
     """
-    vol = as_volume(volume).astype(np.float64)
+    vol = as_volume(volume).astype(np.float64, copy=False)
     sp = np.asarray(spacing, float)
     min_self_weight = check("blur_min_self_weight", blur_min_self_weight)
     gray = np.asarray(gray, float)

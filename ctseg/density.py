@@ -171,7 +171,7 @@ def density_volume(volume, spacing=(1.0, 1.0, 1.0), density_sigma_px=DEFAULTS.de
     """
     if np.ndim(volume) != 3:
         raise InputError(f"volume: expected a 3D array (nz, ny, nx), got shape {np.shape(volume)}")
-    vol = as_volume(volume, min_side=2).astype(np.float64)
+    vol = as_volume(volume, min_side=2).astype(np.float64, copy=False)
     sp = check_spacing(spacing)
     sigma = check("density_sigma_px", density_sigma_px)
     floor = check("density_floor", density_floor)

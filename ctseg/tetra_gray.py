@@ -20,7 +20,7 @@ def _as_volume(volume):
     if np.ndim(volume) != 3:
         raise InputError(f"volume: expected a 3D array (nz, ny, nx), got shape {np.shape(volume)}")
     _check_shape(np.shape(volume), "volume")
-    return as_volume(volume).astype(np.float64)
+    return as_volume(volume).astype(np.float64, copy=False)
 
 
 def _check_shape(shape, name="shape"):
