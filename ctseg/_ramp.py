@@ -9,7 +9,11 @@ from numba import njit, prange
 
 @njit(cache=True)
 def _sign(x):
-    return (x > 0.0) - (x < 0.0)
+    if x > 0.0:
+        return 1
+    if x < 0.0:
+        return -1
+    return 0
 
 
 @njit(cache=True)
