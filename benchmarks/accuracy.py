@@ -151,6 +151,15 @@ def write_results(out, md, results):
         json.dump(results, fh, indent=1)
 
 
+def publish(md_lines, out, results):
+    """Print the markdown table (lines) and, with ``out``, write it and the results
+    (:func:`write_results`)."""
+    md = "\n".join(md_lines)
+    print(md)
+    if out:
+        write_results(out, md, results)
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default=None)

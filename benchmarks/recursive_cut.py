@@ -19,8 +19,9 @@ import time
 
 import maxflow
 import numpy as np
-from accuracy import write_results  # benchmarks/ is this script's folder
+from accuracy import publish  # benchmarks/ is this script's folder
 from scipy.sparse import coo_matrix
+from run import interleaved_medians
 from scipy.sparse.csgraph import connected_components
 
 import ctseg
@@ -93,13 +94,8 @@ def main():
             for field in ("material", "leaf", "mode_gray", "material_gray"):
                 if not np.array_equal(getattr(ref, field), getattr(new, field)):
                     raise SystemExit(f"{size}^3 call {n}: {field} differs between the variants")
-            times = {v: [] for v in VARIANTS}
-            for _ in range(args.repeats):
-                for v in VARIANTS:
-                    t = time.perf_counter()
-                    _run(v, a, k)
-                    times[v].append(time.perf_counter() - t)
-            med = {v: float(np.median(t)) for v, t in times.items()}
+            med = interleaved_medians({v: (lambda v=v: _run(v, a, k)) for v in VARIANTS},
+                                      args.repeats)
             rows.append({"volume": f"{size}^3", "call": n + 1, "tetrahedra": len(a[0]),
                          "cuts": int(new.graphcut_calls), "median_s": med,
                          "ratio": med["whole graph, scipy"] / med["merged seeds, union-find"]})
@@ -114,10 +110,7 @@ def main():
         md.append(f"| {r['volume']} | {r['call']} | {r['tetrahedra']} | {r['cuts']} | "
                   f"{m['whole graph, scipy']:.3f} | {m['merged seeds, union-find']:.3f} | "
                   f"{r['ratio']:.2f} |")
-    md = "\n".join(md)
-    print(md)
-    if args.out:
-        write_results(args.out, md, {"rows": rows, "repeats": args.repeats})
+    publish(md, args.out, {"rows": rows, "repeats": args.repeats})
 
 
 if __name__ == "__main__":

@@ -72,6 +72,18 @@ def median_time(fn, repeats):
     return float(np.median(times)), out
 
 
+def interleaved_medians(variants, repeats):
+    """Median wall time of each of ``variants`` (name -> callable), the variants run in
+    turn ``repeats`` times so that a machine's drift reaches them alike."""
+    times = {name: [] for name in variants}
+    for _ in range(repeats):
+        for name, fn in variants.items():
+            t0 = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t0)
+    return {name: float(np.median(t)) for name, t in times.items()}
+
+
 def phantom(rows, cols, seed, materials=None):
     """A simulated slice (rows x cols, cropped from a square one) with truth."""
     from ctseg.phantoms import MATERIALS, Phantom, make_phantom

@@ -16,8 +16,9 @@ import platform
 import time
 
 import numpy as np
-from accuracy import write_results  # benchmarks/ is this script's folder
+from accuracy import publish  # benchmarks/ is this script's folder
 from numba import njit
+from run import interleaved_medians
 
 from ctseg import stages3d
 from ctseg._ward import _neighbour_lists, _ward_merges, _ward_pair_cost
@@ -207,13 +208,8 @@ def main():
         ref = run(_lazy_ward_merges)  # also compiles both outside the timings
         if not np.array_equal(run(_ward_merges)[0], ref[0]):
             raise SystemExit(f"{name}: the indexed heap's merges differ from the lazy heap's")
-        times = {"indexed": [], "lazy": []}
-        for _ in range(args.repeats):
-            for label, kernel in (("lazy", _lazy_ward_merges), ("indexed", _ward_merges)):
-                t = time.perf_counter()
-                run(kernel)
-                times[label].append(time.perf_counter() - t)
-        med = {label: float(np.median(v)) for label, v in times.items()}
+        med = interleaved_medians({"lazy": lambda: run(_lazy_ward_merges),
+                                   "indexed": lambda: run(_ward_merges)}, args.repeats)
         rows.append({"graph": name, "nodes": len(w), "edges": len(e), "median_s": med,
                      "ratio": med["lazy"] / med["indexed"]})
         print(rows[-1], flush=True)
@@ -225,10 +221,7 @@ def main():
     for r in rows:
         md.append(f"| {r['graph']} | {r['nodes']} | {r['edges']} | {r['median_s']['lazy']:.3f} | "
                   f"{r['median_s']['indexed']:.3f} | {r['ratio']:.2f} |")
-    md = "\n".join(md)
-    print(md)
-    if args.out:
-        write_results(args.out, md, {"rows": rows, "repeats": args.repeats})
+    publish(md, args.out, {"rows": rows, "repeats": args.repeats})
 
 
 if __name__ == "__main__":
