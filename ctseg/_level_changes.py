@@ -9,25 +9,25 @@ from numba import njit, prange
 
 
 @njit(cache=True)
-def _mark_slice(lev, out, k):
-    """Mark the voxels of slice k whose 3 x 3 x 3 neighbourhood (clipped to the array, as
-    ``mode='nearest'`` repeats the border) holds a value other than their own."""
+def _differs(lev, k, j, i):
+    """Whether the 3 x 3 x 3 neighbourhood of voxel (k, j, i), clipped to the array (as
+    ``mode='nearest'`` repeats the border), holds a value other than its own."""
     nz, ny, nx = lev.shape
-    for j in range(ny):
-        for i in range(nx):
-            v = lev[k, j, i]
-            found = False
-            for kk in range(max(k - 1, 0), min(k + 2, nz)):
-                for jj in range(max(j - 1, 0), min(j + 2, ny)):
-                    for ii in range(max(i - 1, 0), min(i + 2, nx)):
-                        if lev[kk, jj, ii] != v:
-                            found = True
-                            break
-                    if found:
-                        break
-                if found:
-                    break
-            out[k, j, i] = found
+    v = lev[k, j, i]
+    for kk in range(max(k - 1, 0), min(k + 2, nz)):
+        for jj in range(max(j - 1, 0), min(j + 2, ny)):
+            for ii in range(max(i - 1, 0), min(i + 2, nx)):
+                if lev[kk, jj, ii] != v:
+                    return True
+    return False
+
+
+@njit(cache=True)
+def _mark_slice(lev, out, k):
+    """Mark the voxels of slice k next to a level change (:func:`_differs`)."""
+    for j in range(lev.shape[1]):
+        for i in range(lev.shape[2]):
+            out[k, j, i] = _differs(lev, k, j, i)
 
 
 @njit(cache=True)

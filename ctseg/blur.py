@@ -17,7 +17,6 @@ from scipy import ndimage
 
 from . import _threads
 from ._level_changes import level_changes, level_changes_parallel
-from ._threads import thread_map
 from ._validate import as_image, as_volume, check_number
 from .errors import ParameterError
 from .graph import connected_pieces
@@ -155,7 +154,7 @@ def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_
 
     def misfits(widths):  # the new ones side by side (ndimage releases the GIL)
         new = [float(s) for s in dict.fromkeys(widths) if float(s) not in seen]
-        seen.update(zip(new, thread_map(fit, new)))
+        seen.update(zip(new, _threads.thread_map(fit, new)))
         return [seen[float(s)] for s in widths]
 
     def parabola(xs):  # vertex of the parabola through three equally spaced points
