@@ -23,16 +23,13 @@ chunk would waste the buffers' slack."""
 
 def _record_growing(P, dims, itype, cap):
     """One chunk, its buffers grown until it fits: (ends, voxel, overlap), ``ends[t]``
-    the count of the chunk's entries up to tetrahedron t included; ``(-1 - t, None,
-    None)`` if tetrahedron t outgrew the kernel's polyhedron buffers."""
+    the count of the chunk's entries up to tetrahedron t included."""
     m = len(P)
     start = np.zeros(m + 1, np.int64)
     voxel, overlap = np.empty(cap, itype), np.empty(cap)
     t = 0
     while True:
         t = _record(P, *dims, t, start, voxel, overlap)
-        if t < 0:
-            return t, None, None
         if t == m:
             return start[1:], voxel, overlap
         cap = int(1.25 * cap) + 4096
@@ -50,7 +47,7 @@ def overlap_rows(P, dims, expected):
 
     ``expected`` (m,): each tetrahedron's expected cell count (the buffers' sizes).
     Returns ``(start, voxel, overlap)`` as :class:`ctseg.tetra_gray.VoxelOverlaps` keeps
-    them, or ``(-1 - t, None, None)`` if tetrahedron t outgrew the kernel's buffers.
+    them.
     """
     m = len(P)
     itype = np.int32 if int(np.prod(dims)) < 2 ** 31 else np.int64
@@ -67,14 +64,9 @@ def overlap_rows(P, dims, expected):
         t = _record(P[t0:t1], *dims, 0, start, voxel[a:a + k], overlap[a:a + k])
         if t == t1 - t0:
             return start[1:], None, None
-        if t < 0:
-            return t, None, None
         return _record_growing(P[t0:t1], dims, itype, int(2 * k))
 
     done = thread_map(chunk, range(len(caps)))
-    for t0, (e, v, _) in zip(bounds, done):
-        if v is None and np.ndim(e) == 0:
-            return int(e) - t0, None, None
     pieces, start, q = [], np.zeros(m + 1, np.int64), 0
     for c, (e, v, o) in enumerate(done):
         n = int(e[-1])

@@ -84,26 +84,14 @@ def _corners(points, tetrahedra, shape, spacing):
     return np.ascontiguousarray(idx[tets])
 
 
-def _run(P, shape, img, values, tet_vol, tet_w, vox_vol, vox_w):
-    """The streaming kernel, and its one way to fail (never seen: a guard, not a case)."""
-    count = _overlaps(P, *shape, img, values, tet_vol, tet_w, vox_vol, vox_w)
-    if count < 0:
-        _outgrew(-1 - count)
-
-
-def _outgrew(t):
-    raise RuntimeError(f"tetra_gray: the clipped pieces of tetrahedron {t} outgrew the "
-                       "kernel's buffers (please report this mesh)")
-
-
 def tetra_gray(volume, points, tetrahedra, spacing=(1.0, 1.0, 1.0)):
     """Volume-weighted mean gray value of each tetrahedron (SPEC 9.5).
 
     ``f(t) = sum_v V_v |c_v ∩ t| / sum_v |c_v ∩ t|`` over voxels v, where voxel (k, j, i)
     is the cube [i -/+ 1/2] x [j -/+ 1/2] x [k -/+ 1/2] in index units, clipped to the box
     of voxel centres [0, nx-1] x [0, ny-1] x [0, nz-1] (border voxels count half, edge
-    voxels a quarter, corner voxels an eighth). The overlaps are exact (each tetrahedron
-    is cut by the voxel planes, :func:`voxel_overlaps`), so a tetrahedron smaller than a
+    voxels a quarter, corner voxels an eighth). The overlaps are exact up to rounding
+    (:func:`voxel_overlaps`), so a tetrahedron smaller than a
     voxel still gets a value, and over a mesh that fills the box every voxel's volume is
     shared out exactly once: ``sum_t |t| f(t)`` is the integral of the piecewise-constant
     image over the box.
@@ -150,8 +138,8 @@ def tetra_gray(volume, points, tetrahedra, spacing=(1.0, 1.0, 1.0)):
     m = len(P)
     tet_vol = np.zeros(m)
     tet_w = np.zeros(m)
-    _run(P, vol.shape, np.ascontiguousarray(vol.ravel()), np.zeros(0), tet_vol, tet_w,
-         np.zeros(0), np.zeros(0))
+    _overlaps(P, *vol.shape, np.ascontiguousarray(vol.ravel()), np.zeros(0), tet_vol, tet_w,
+              np.zeros(0), np.zeros(0))
     _check_filled(tet_vol)
     return tet_w / tet_vol
 
@@ -212,8 +200,8 @@ def voxel_mean_of_tetrahedra(values, points, tetrahedra, shape, spacing=(1.0, 1.
     covered = np.zeros(n)
     weighted = np.zeros(n)
     if len(P):
-        _run(P, dims, np.zeros(0), np.ascontiguousarray(vals), np.zeros(0), np.zeros(0),
-             covered, weighted)
+        _overlaps(P, *dims, np.zeros(0), np.ascontiguousarray(vals), np.zeros(0), np.zeros(0),
+                  covered, weighted)
     mean = np.divide(weighted, covered, out=np.zeros_like(weighted), where=covered > 0)
     return mean.reshape(dims), covered.reshape(dims)
 
@@ -221,12 +209,14 @@ def voxel_mean_of_tetrahedra(values, points, tetrahedra, shape, spacing=(1.0, 1.
 def voxel_overlaps(points, tetrahedra, shape, spacing=(1.0, 1.0, 1.0)):
     """Exact volumes of every (tetrahedron, voxel) overlap.
 
-    Each tetrahedron (in index units, ``points / spacing``) is cut by the planes
-    ``z = k + 1/2`` it crosses, each slab piece by the planes ``y = j + 1/2``, each row
-    piece by ``x = i + 1/2`` (convex polyhedra, split exactly; :mod:`ctseg._tet_clip`), so
-    only the voxels a tetrahedron reaches are visited and its pieces partition it. A
-    tetrahedron inside one voxel is one overlap. The voxel cubes are clipped to the box of
-    voxel centres, as in :func:`tetra_gray`.
+    Each tetrahedron (in index units, ``points / spacing``) is shared out row by row of
+    voxels: the volume of its piece in a row's prism below the plane ``x = c`` is the
+    integral of ``(x - c) n_x`` over its faces clipped to the prism and the plane
+    (divergence theorem), and a voxel gets the difference between its two planes
+    (:mod:`ctseg._tet_clip`). Only the voxels a tetrahedron reaches are visited, and its
+    overlaps sum to its volume up to rounding. A tetrahedron inside one voxel is one
+    overlap. The voxel cubes are clipped to the box of voxel centres, as in
+    :func:`tetra_gray`.
 
     Parameters
     ----------
@@ -326,8 +316,6 @@ class VoxelOverlaps:
         P = _corners(points, tetrahedra, dims, spacing)
         self.shape = dims
         self.start, self.voxel, self.overlap = overlap_rows(P, dims, _expected_cells(P))
-        if self.voxel is None:
-            _outgrew(-1 - self.start)
         self.tet_volume = _row_sums()(self.start, self.voxel, self.overlap, np.zeros(0))[0]
 
     @property
