@@ -34,6 +34,8 @@ import time
 
 import numpy as np
 
+from ctseg.resources import peak_rss_mib, reset_peak_rss, rss_mib
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
@@ -44,25 +46,6 @@ INITS = ("ward", "random", "density_random")
 
 
 # ----------------------------------------------------------------------------- helpers
-def status_mib(field):
-    """VmRSS (now) or VmHWM (peak since the last reset) of this process, MiB."""
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(field + ":"):
-                return int(line.split()[1]) / 1024
-    return float("nan")
-
-
-def reset_peak():
-    """Reset VmHWM to the current RSS (Linux >= 4.0); False where that is refused."""
-    try:
-        with open("/proc/self/clear_refs", "w") as fh:
-            fh.write("5")
-        return True
-    except OSError:
-        return False
-
-
 def median_time(fn, repeats):
     times, out = [], None
     for _ in range(repeats):
@@ -149,12 +132,12 @@ def child_main(spec):
             z = dict(np.load(spec["path"]))
             job = lambda: segment_triangles(z["gray"], z["area"], z["adjacency"],  # noqa: E731
                                             z["centroids"], levels=z["levels"])
-        exact = reset_peak()
-        base = status_mib("VmRSS")
+        exact = reset_peak_rss()
+        base = rss_mib()
         t0 = time.perf_counter()
         job()
         wall = time.perf_counter() - t0
-        peak = status_mib("VmHWM")
+        peak = peak_rss_mib()
     print(json.dumps({"wall_s": wall, "peak_mib": peak - base, "peak_reset": exact}))
 
 

@@ -55,7 +55,7 @@ from scipy import ndimage
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-from run import reset_peak, status_mib  # noqa: E402  (the benchmarks' one memory probe)
+from ctseg.resources import peak_rss_mib, reset_peak_rss, rss_mib  # noqa: E402
 
 METHODS = ("ctseg_3d", "ctseg_slices", "otsu", "graphcut", "cgal", "cleaver")
 GOALS = {"min_dice": 0.95, "interface_mean_vox": 0.5, "interface_p95_vox": 1.5,
@@ -202,14 +202,14 @@ def child_main(spec):
     if "labels" not in spec:  # the meshers of a label map have no kernels to compile
         job(make_part_3d(24, seed=1, porosity=False).image, sp, spec)  # warm-up: imports, kernels
     img = np.load(spec["image"])
-    exact = reset_peak()
-    before = status_mib("VmRSS")
+    exact = reset_peak_rss()
+    before = rss_mib()
     walls = []
     for _ in range(spec["repeats"]):
         t0 = time.perf_counter()
         out = job(img, sp, spec)
         walls.append(time.perf_counter() - t0)
-    peak = status_mib("VmHWM")
+    peak = peak_rss_mib()
     workers = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     labels, gray, extra, arrays = post(spec["method"], out, img, sp)
     if "mesh_wall_s" in extra:  # Cleaver ran in a process of its own: its numbers

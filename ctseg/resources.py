@@ -1,6 +1,8 @@
 """Memory needed by a job, checked before the work starts: an input that cannot fit fails
 at once with a clear message instead of being killed by the system hours later."""
 
+import sys
+
 from .errors import InputError
 
 SLICE_BYTES_PER_PIXEL = 160
@@ -38,6 +40,52 @@ def available_bytes():
     except OSError:
         pass
     return None
+
+
+def _status_kib(field):
+    """A field of /proc/self/status in KiB (VmRSS: now; VmHWM: the peak), None where
+    there is none."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1])
+    except OSError:
+        pass
+    return None
+
+
+def reset_peak_rss():
+    """Start a new peak of this process's resident memory: VmHWM back to the current RSS
+    (Linux >= 4.0, /proc/self/clear_refs). False where the system refuses; the peak is
+    then the process's lifetime peak."""
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def rss_mib():
+    """This process's resident memory now, MiB (NaN where unknown)."""
+    kib = _status_kib("VmRSS")
+    return float("nan") if kib is None else kib / 1024
+
+
+def peak_rss_mib():
+    """This process's peak resident memory since :func:`reset_peak_rss` (its lifetime peak
+    where that was refused), MiB; NaN where unknown. Counts every thread and every
+    allocator (numpy, numba, Qhull), at no cost while the work runs."""
+    kib = _status_kib("VmHWM")
+    if kib is None:
+        try:
+            import resource
+        except ImportError:  # Windows
+            return float("nan")
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        return peak / 2 ** 20 if sys.platform == "darwin" else peak / 1024  # bytes there
+    return kib / 1024
 
 
 def slice_bytes(rows, cols):
