@@ -89,8 +89,7 @@ def material_modes(gray, area, bandwidth, min_area, separation, n_modes=None):
         # volume): the classes of multi-level Otsu, which need only distinct values
         edges = otsu_thresholds(f, w, n_modes)
         basin = np.searchsorted(edges, f)
-        means = np.array([np.average(f[basin == k], weights=w[basin == k]) for k in range(n_modes)])
-        return means, edges
+        return _basin_means(f, w, basin, [0.0] * n_modes), edges
     while len(peaks) > 1:
         vals = [valley(i) for i in range(len(peaks) - 1)]
         bounds = [0] + [v + 1 for v in vals] + [nb]
@@ -119,9 +118,17 @@ def material_modes(gray, area, bandwidth, min_area, separation, n_modes=None):
     vals = [valley(i) for i in range(len(peaks) - 1)]
     edges = np.array([(v + 0.5) * bin_w for v in vals])
     basin = np.searchsorted(edges, f)
-    means = np.array([np.average(f[basin == k], weights=w[basin == k]) if np.any(basin == k)
-                      else peaks[k] * bin_w for k in range(len(peaks))])
-    return means, edges
+    return _basin_means(f, w, basin, [p * bin_w for p in peaks]), edges
+
+
+def _basin_means(f, w, basin, empty):
+    """Weighted mean of ``f`` in each basin k (``empty[k]`` where it holds nothing); one
+    mask per basin."""
+    means = np.empty(len(empty))
+    for k in range(len(empty)):
+        inside = basin == k
+        means[k] = np.average(f[inside], weights=w[inside]) if inside.any() else empty[k]
+    return means
 
 
 def dominant_spread(values, weights):
