@@ -286,40 +286,6 @@ def _span(corners):
     return span
 
 
-@njit(cache=False)
-def _overlaps(P, nz, ny, nx, img, values, tet_vol, tet_w, vox_vol, vox_w):
-    """Visit every (tetrahedron, voxel) overlap of positive volume, without keeping them.
-
-    ``P`` (m, 4, 3): the corners in index units, inside the box. With an image
-    (``img.size > 0``, flat): add each overlap's volume to ``tet_vol`` and volume x gray
-    to ``tet_w`` (per tetrahedron). With per-tetrahedron ``values``: add each overlap's
-    volume to ``vox_vol`` and volume x value to ``vox_w`` (per flat voxel). Returns the
-    number of overlaps, or -1 - t if tetrahedron t outgrew the buffers.
-    """
-    m = P.shape[0]
-    pos_buf, nb_buf, side, newid, mark, cells, vols = _work()
-    count = 0
-    for t in range(m):
-        span = _span(P[t])
-        if span > cells.shape[0]:
-            cells = np.empty(2 * span, np.int64)
-            vols = np.empty(2 * span)
-        n = _tet_cells(P[t], nz, ny, nx, cells, vols, pos_buf, nb_buf, side, newid, mark)
-        if n < 0:
-            return -1 - t
-        for q in range(n):
-            c = cells[q]
-            a = vols[q]
-            if img.shape[0] > 0:
-                tet_vol[t] += a
-                tet_w[t] += a * img[c]
-            if values.shape[0] > 0:
-                vox_vol[c] += a
-                vox_w[c] += a * values[t]
-        count += n
-    return count
-
-
 @njit(cache=False, nogil=True)
 def _record(P, nz, ny, nx, t0, start, voxel, overlap):
     """Write the overlaps of tetrahedra ``t0, t0 + 1, ...`` into compressed rows: those of

@@ -1,5 +1,6 @@
 """The whole 2D method in one call: image -> segmented triangle mesh (paper sections 5-6)."""
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -14,7 +15,7 @@ from .intensity import estimate_noise, rescale_gray
 from .labelling import label_mesh
 from .levels_given import check_gray_levels
 from .params import AUTO, DEFAULTS, resolve
-from .resources import check_memory, peak_rss_mib, reset_peak_rss, slice_bytes
+from .resources import PeakRss, check_memory, slice_bytes
 from .site_budget import site_budget
 from .subpixel import subpixel_mesh
 
@@ -30,21 +31,20 @@ def stage_runner(report, times, peaks_mib=None):
     """A function ``timed(name, fraction, fn, *args, **kwargs)`` that reports the stage
     starting (``report(fraction, name)``), runs ``fn`` and records its wall time in
     ``times[name]``, and, given ``peaks_mib``, the process's peak resident memory during
-    the stage (MiB, :func:`ctseg.resources.peak_rss_mib`; the lifetime peak so far where
-    the system cannot restart it) in ``peaks_mib[name]``. The peak is read from the
-    system, not traced: tracing every allocation (tracemalloc) slowed the 3D mode by a
+    the stage (MiB, :class:`ctseg.resources.PeakRss`) in ``peaks_mib[name]``. The memory
+    is sampled, not traced: tracing every allocation (tracemalloc) slowed the 3D mode by a
     tenth."""
     def timed(name, frac, fn, *a, **k):
         report(frac, name)  # the stage that starts now, and the share of the work done
-        if peaks_mib is not None:
-            reset_peak_rss()
+        probe = PeakRss() if peaks_mib is not None else nullcontext()
         t0 = time.perf_counter()
         try:
-            return fn(*a, **k)
+            with probe:
+                return fn(*a, **k)
         finally:
             times[name] = time.perf_counter() - t0
             if peaks_mib is not None:
-                peaks_mib[name] = peak_rss_mib()
+                peaks_mib[name] = probe.peak_mib
     return timed
 
 
