@@ -32,8 +32,7 @@ def stage_runner(report, times, peaks_mib=None):
     starting (``report(fraction, name)``), runs ``fn`` and records its wall time in
     ``times[name]``, and, given ``peaks_mib``, the process's peak resident memory during
     the stage (MiB, :class:`ctseg.resources.PeakRss`) in ``peaks_mib[name]``. The memory
-    is sampled, not traced: tracing every allocation (tracemalloc) slowed the 3D mode by a
-    tenth."""
+    is sampled, not traced: tracing every allocation would slow every stage."""
     def timed(name, frac, fn, *a, **k):
         report(frac, name)  # the stage that starts now, and the share of the work done
         probe = PeakRss() if peaks_mib is not None else nullcontext()

@@ -1,5 +1,7 @@
 """Memory needed by a job, checked before the work starts: an input that cannot fit fails
-at once with a clear message instead of being killed by the system hours later."""
+at once with a clear message instead of being killed by the system hours later. And the
+probes that measure what a job used: resident memory now, its peak since a reset, and the
+peak while a block runs (:class:`PeakRss`, the 3D mode's per-stage peaks)."""
 
 import os
 import sys
@@ -44,9 +46,11 @@ def available_bytes():
     return None
 
 
+_PAGE_BYTES = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+
+
 def _status_kib(field):
-    """A field of /proc/self/status in KiB (VmRSS: now; VmHWM: the peak), None where
-    there is none."""
+    """A field of /proc/self/status in KiB (VmHWM: the peak), None where there is none."""
     try:
         with open("/proc/self/status") as fh:
             for line in fh:
@@ -70,9 +74,12 @@ def reset_peak_rss():
 
 
 def rss_mib():
-    """This process's resident memory now, MiB (NaN where unknown)."""
-    kib = _status_kib("VmRSS")
-    return float("nan") if kib is None else kib / 1024
+    """This process's resident memory now, MiB (/proc/self/statm; NaN where unknown)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * _PAGE_BYTES / 2 ** 20
+    except OSError:
+        return float("nan")
 
 
 def peak_rss_mib():
@@ -88,19 +95,6 @@ def peak_rss_mib():
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         return peak / 2 ** 20 if sys.platform == "darwin" else peak / 1024  # bytes there
     return kib / 1024
-
-
-_PAGE_BYTES = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
-
-
-def _statm_rss_mib():
-    """Resident memory now from /proc/self/statm (cheaper to read than status), MiB;
-    None where there is no /proc."""
-    try:
-        with open("/proc/self/statm") as fh:
-            return int(fh.read().split()[1]) * _PAGE_BYTES / 2 ** 20
-    except OSError:
-        return None
 
 
 class PeakRss:
@@ -126,8 +120,8 @@ class PeakRss:
         self._thread = None
 
     def _sample(self):
-        rss = _statm_rss_mib()
-        if rss is not None and not rss <= self.peak_mib:  # also replaces the NaN
+        rss = rss_mib()
+        if not rss <= self.peak_mib:  # also replaces the NaN (a NaN rss never does)
             self.peak_mib = rss
 
     def _run(self):
