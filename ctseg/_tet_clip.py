@@ -9,8 +9,9 @@ count, clipped to the prism and to ``x <= c``. Each face is clipped to the slab 
 then to the row of j (convex polygons, one plane at a time), and cell i of the row gets
 ``V(i + 1/2) - V(i - 1/2)``; a face wholly below a plane adds its integral, kept from the
 row's clipping (a fan of triangles), a face wholly above adds nothing. No polyhedron is
-ever built, so nothing can outgrow a buffer: a triangle clipped by five planes has at
-most 8 vertices.
+ever built, and no buffer can overflow: one clip makes at most 2n vertices of n (a
+crossing and a kept vertex per edge), even where rounding leaves a polygon slightly
+non-convex, and the buffers hold that bound after each clip.
 
 Only the cells a tetrahedron reaches are visited: the slabs of its own extent in z, the
 rows of each slab's clipped faces' extent in y, the cells of each row's extent in x, all
@@ -28,8 +29,11 @@ from numba import njit
 # outward faces (counter-clockwise seen from outside) of a positively oriented
 # tetrahedron (0, 1, 2, 3)
 _FACES = ((0, 2, 1), (0, 3, 2), (0, 1, 3), (1, 2, 3))
-# a triangle clipped by two planes of z, two of y and one of x has at most 3 + 5 vertices
-_MAXP = 8
+# vertices a face's polygon may have after its z clips (slab), its y clips (row) and its x
+# clip (the scratch buffer, also the first clip's target of each pair): 3 x 2^clips
+_MAX_SLAB = 12
+_MAX_ROW = 48
+_MAX_TMP = 96
 
 
 @njit(cache=True)
@@ -203,8 +207,8 @@ def _tet_cells(corners, nz, ny, nx, cells, vols, work):
 @njit(cache=True)
 def _work():
     """The work buffers of :func:`_tet_cells`."""
-    return (np.empty((4, 3, 3)), np.empty((4, _MAXP, 3)), np.empty((4, _MAXP, 3)),
-            np.empty((_MAXP, 3)), np.empty(4, np.int64), np.empty(4, np.int64), np.empty(4),
+    return (np.empty((4, 3, 3)), np.empty((4, _MAX_SLAB, 3)), np.empty((4, _MAX_ROW, 3)),
+            np.empty((_MAX_TMP, 3)), np.empty(4, np.int64), np.empty(4, np.int64), np.empty(4),
             np.empty(4), np.empty(4), np.empty(4), np.empty((4, 3)))
 
 
