@@ -10,7 +10,10 @@ index order.
 import numpy as np
 from numba import njit, prange
 
-_MAXV = 8  # a triangle clipped by 4 half-planes has at most 7 vertices
+# a triangle clipped by 4 half-planes has at most 7 vertices in exact arithmetic; one clip
+# makes at most 2n of n even where rounding leaves the polygon slightly non-convex, and
+# numba does not check bounds: room for 3 x 2^4
+_MAXV = 48
 
 
 def _corners(points, triangles):
