@@ -114,7 +114,7 @@ def _tet_cells(corners, nz, ny, nx, cells, vols, work):
     entries as the tetrahedron's range of cells (:func:`_span`); ``work`` is
     :func:`_work`'s. Returns the number written.
     """
-    tri, slab, rows, tmp, sn, rn, area, moment, xlo, xhi, loc = work
+    tri, slab, rows, tmp, sn, rn, area, moment, xlo, xhi, loc, fylo, fyhi = work
     # local origin: an integer corner, so that the planes stay exact and the volumes are
     # formed from small numbers
     o0 = int(np.floor(min(corners[0, 0], corners[1, 0], corners[2, 0], corners[3, 0])))
@@ -154,9 +154,13 @@ def _tet_cells(corners, nz, ny, nx, cells, vols, work):
         for f in range(4):
             m = _clip(tri[f], 3, tmp, 2, k - 0.5, False)
             sn[f] = _clip(tmp, m, slab[f], 2, k + 0.5, True)
+            fylo[f] = np.inf
+            fyhi[f] = -np.inf
             for q in range(sn[f]):
-                ylo = min(ylo, slab[f, q, 1])
-                yhi = max(yhi, slab[f, q, 1])
+                fylo[f] = min(fylo[f], slab[f, q, 1])
+                fyhi[f] = max(fyhi[f], slab[f, q, 1])
+            ylo = min(ylo, fylo[f])
+            yhi = max(yhi, fyhi[f])
         if ylo > yhi:
             continue
         j0, j1 = _cell_range(ylo, yhi, ny - o1)
@@ -165,6 +169,8 @@ def _tet_cells(corners, nz, ny, nx, cells, vols, work):
             lo = np.inf
             hi = -np.inf
             for f in range(4):
+                if fyhi[f] <= j - 0.5 or fylo[f] >= j + 0.5:
+                    continue  # misses the row, or only touches it
                 m = _clip(slab[f], sn[f], tmp, 1, j - 0.5, False)
                 m = _clip(tmp, m, rows[nf], 1, j + 0.5, True)
                 if m < 3:
@@ -209,7 +215,7 @@ def _work():
     """The work buffers of :func:`_tet_cells`."""
     return (np.empty((4, 3, 3)), np.empty((4, _MAX_SLAB, 3)), np.empty((4, _MAX_ROW, 3)),
             np.empty((_MAX_TMP, 3)), np.empty(4, np.int64), np.empty(4, np.int64), np.empty(4),
-            np.empty(4), np.empty(4), np.empty(4), np.empty((4, 3)))
+            np.empty(4), np.empty(4), np.empty(4), np.empty((4, 3)), np.empty(4), np.empty(4))
 
 
 @njit(cache=True)
