@@ -230,6 +230,17 @@ def _span(corners):
 
 
 @njit(cache=True)
+def _cells_of(corners, nz, ny, nx, cells, vols, work):
+    """:func:`_tet_cells` of one tetrahedron, the cell lists grown first where its range
+    of cells might not fit: (cells, vols, count)."""
+    span = _span(corners)
+    if span > cells.shape[0]:
+        cells = np.empty(2 * span, np.int64)
+        vols = np.empty(2 * span)
+    return cells, vols, _tet_cells(corners, nz, ny, nx, cells, vols, work)
+
+
+@njit(cache=True)
 def _overlaps(P, nz, ny, nx, img, values, tet_vol, tet_w, vox_vol, vox_w):
     """Visit every (tetrahedron, voxel) overlap of positive volume, without keeping them.
 
@@ -245,11 +256,7 @@ def _overlaps(P, nz, ny, nx, img, values, tet_vol, tet_w, vox_vol, vox_w):
     vols = np.empty(64)
     count = 0
     for t in range(m):
-        span = _span(P[t])
-        if span > cells.shape[0]:
-            cells = np.empty(2 * span, np.int64)
-            vols = np.empty(2 * span)
-        n = _tet_cells(P[t], nz, ny, nx, cells, vols, work)
+        cells, vols, n = _cells_of(P[t], nz, ny, nx, cells, vols, work)
         for q in range(n):
             c = cells[q]
             a = vols[q]
@@ -278,11 +285,7 @@ def _record(P, nz, ny, nx, t0, start, voxel, overlap):
     vols = np.empty(64)
     count = start[t0]
     for t in range(t0, m):
-        span = _span(P[t])
-        if span > cells.shape[0]:
-            cells = np.empty(2 * span, np.int64)
-            vols = np.empty(2 * span)
-        n = _tet_cells(P[t], nz, ny, nx, cells, vols, work)
+        cells, vols, n = _cells_of(P[t], nz, ny, nx, cells, vols, work)
         if count + n > voxel.shape[0]:
             return t
         for q in range(n):
