@@ -430,7 +430,7 @@ def test_local_drift_is_the_largest_drift_in_the_cell_box(reach):
     for n, ext in ((7, (3.0, 40.0, 9.0)), (400, (30.0, 20.0, 25.0)), (2500, (10.0, 60.0, 60.0))):
         sites = rng.uniform(0, 1, (n, 3)) * ext
         drift = rng.exponential(0.2, n) * (rng.uniform(size=n) < 0.6)
-        h, gx, gy, gz, _, _ = _site_grid_3d(sites, *ext)
+        h, gx, gy, gz, _, _, _ = _site_grid_3d(sites, *ext)
         cell = np.minimum((sites / h).astype(int), [gx - 1, gy - 1, gz - 1])
         top = np.zeros((gz, gy, gx))
         np.maximum.at(top, (cell[:, 2], cell[:, 1], cell[:, 0]), drift)
