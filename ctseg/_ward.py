@@ -1,11 +1,40 @@
-"""Compiled kernels (numba) of :mod:`ctseg.sites`: Ward's merge heap.
+"""Compiled kernels (numba) of :mod:`ctseg.sites`: Ward's merge heap, and the rounds of
+reciprocal-pair merges that pre-merge a large 3D block graph.
 
-Private: :func:`ctseg.sites.ward_agglomerate` is the entry point.
+Private: :func:`ctseg.sites.ward_agglomerate` and :func:`ctseg.sites.ward_sites_3d` are
+the entry points.
 """
 import numpy as np
 from numba import njit
 
 _ARITY = 4  # children per heap node: half the depth of a binary heap, fewer cache misses
+
+ROUND_SHARE = 0.5
+"""Share of the reciprocal pairs (the cheapest) that merge in one round of
+:func:`reciprocal_premerge`. Merging all of them would merge every region at the same
+pace, as if the density were flat; the cheapest half keeps greedy Ward's order between
+dense and flat regions (README, *Accuracy in 3D*, has the measurements)."""
+ROUNDS_PER_SITE = 4
+"""The rounds stop at this many clusters per site; the greedy heap takes them from there."""
+
+
+def reciprocal_premerge(weights, centroids, edges, n_clusters):
+    """Ward pre-merge by rounds of reciprocal nearest-neighbour pairs
+    (:func:`_reciprocal_rounds`, :data:`ROUND_SHARE`) down to ``n_clusters``: the
+    clusters' weights, weighted centroids and (unique) adjacency, numbered in node order.
+    """
+    w = np.asarray(weights, np.float64).copy()
+    s = np.ascontiguousarray(np.asarray(centroids, np.float64) * w[:, None])
+    edges = np.asarray(edges, np.int64).reshape(-1, 2)
+    ea, eb = np.ascontiguousarray(edges[:, 0]), np.ascontiguousarray(edges[:, 1])
+    parent, _, n_edges = _reciprocal_rounds(w, s, ea, eb, int(n_clusters), ROUND_SHARE)
+    roots = np.flatnonzero(parent == np.arange(len(w)))
+    index = np.full(len(w), -1, np.int64)
+    index[roots] = np.arange(len(roots))
+    a, b = index[ea[:n_edges]], index[eb[:n_edges]]
+    key = np.unique(np.minimum(a, b) * len(roots) + np.maximum(a, b))
+    return (w[roots], s[roots] / w[roots, None],
+            np.column_stack([key // len(roots), key % len(roots)]))
 
 
 # Compiled (numba): the pure-Python heap took 0.4-0.6 s of 5.0 s at 512 x 512 / 1000 sites
@@ -217,3 +246,100 @@ def _ward_pair_cost(w, s, i, j):
         d = s[i, ax] / wi - s[j, ax] / wj
         d2 += d * d
     return wi * wj / (wi + wj) * d2
+
+
+@njit(cache=True)
+def _reciprocal_rounds(w, s, ea, eb, n_target, share):
+    """Merge reciprocal nearest neighbours of the graph (ea[k], eb[k]) in rounds until
+    n_target clusters remain (or no edge joins two).
+
+    Each round every cluster finds its cheapest neighbour by the Ward cost (ties: the
+    smaller index); the pairs that chose each other are ranked by cost (ties: the smaller
+    first index) and the cheapest ``share`` of them (at least one, at most as many as
+    reach n_target) merge, the larger index into the smaller. Updates w and s in place;
+    returns each node's parent (itself for a survivor: follow the chain to the root), the
+    number of clusters left and of edges: the first ones of ea, eb join survivors.
+    """
+    m = w.shape[0]
+    e = ea.shape[0]
+    parent = np.arange(m)
+    nodes = np.arange(m)  # the live clusters
+    n_nodes = m
+    best = np.empty(m, np.int64)
+    best_cost = np.empty(m)
+    pa = np.empty(m, np.int64)
+    pb = np.empty(m, np.int64)
+    pc = np.empty(m)
+    while n_nodes > n_target and e > 0:
+        for q in range(n_nodes):
+            best_cost[nodes[q]] = np.inf
+            best[nodes[q]] = m
+        for k in range(e):
+            a = ea[k]
+            b = eb[k]
+            c = _ward_pair_cost(w, s, min(a, b), max(a, b))
+            if c < best_cost[a] or (c == best_cost[a] and b < best[a]):
+                best_cost[a] = c
+                best[a] = b
+            if c < best_cost[b] or (c == best_cost[b] and a < best[b]):
+                best_cost[b] = c
+                best[b] = a
+        n = 0
+        for q in range(n_nodes):
+            a = nodes[q]
+            b = best[a]
+            if a < b < m and best[b] == a:
+                pa[n] = a
+                pb[n] = b
+                pc[n] = best_cost[a]
+                n += 1
+        keep = min(max(1, int(np.ceil(share * n))), n_nodes - n_target, n)
+        if keep < n:  # a stable sort: equal costs keep the smaller first index first
+            sel = np.sort(np.argsort(pc[:n], kind="mergesort")[:keep])
+            for q in range(keep):
+                pa[q] = pa[sel[q]]
+                pb[q] = pb[sel[q]]
+        for q in range(keep):
+            a = pa[q]
+            b = pb[q]
+            w[a] += w[b]
+            for ax in range(s.shape[1]):
+                s[a, ax] += s[b, ax]
+            parent[b] = a
+        e = _relink(parent, ea, eb, e, m, 8 * (n_nodes - keep))
+        n = 0
+        for q in range(n_nodes):
+            if parent[nodes[q]] == nodes[q]:
+                nodes[n] = nodes[q]
+                n += 1
+        n_nodes = n
+    return parent, n_nodes, e
+
+
+@njit(cache=True)
+def _relink(parent, ea, eb, e, m, most):
+    """The first e edges moved onto the clusters their nodes merged into this round, those
+    inside one cluster dropped; once there are more than ``most``, one edge per pair of
+    clusters is kept (the block graph's many edges between two clusters cost a cost
+    each, every round). Returns the new count."""
+    n = 0
+    for k in range(e):
+        a = parent[ea[k]]
+        b = parent[eb[k]]
+        if a != b:
+            ea[n] = a
+            eb[n] = b
+            n += 1
+    if n <= most:
+        return n
+    key = np.empty(n, np.int64)
+    for k in range(n):
+        key[k] = min(ea[k], eb[k]) * m + max(ea[k], eb[k])
+    key = np.sort(key)
+    e = 0
+    for k in range(n):
+        if k == 0 or key[k] != key[k - 1]:
+            ea[e] = key[k] // m
+            eb[e] = key[k] % m
+            e += 1
+    return e

@@ -3,7 +3,7 @@ SPEC 2; on voxels SPEC 9.2)."""
 import numpy as np
 
 from ._validate import check_number, check_spacing
-from ._ward import _ward_merges
+from ._ward import ROUNDS_PER_SITE, _ward_merges, reciprocal_premerge
 from .errors import InputError, ParameterError
 from .params import AUTO, DEFAULTS, SPECS, check
 
@@ -71,21 +71,13 @@ def ward_agglomerate(weights, centroids, edges, n_clusters):
     parent, n_alive = _ward_merges(w, s, np.ascontiguousarray(edges[:, 0]),
                                    np.ascontiguousarray(edges[:, 1]), m, int(n_clusters))
     if n_alive > n_clusters:
-        raise InputError(
-            f"Ward clustering: the adjacency graph is disconnected; stopped at {n_alive} clusters"
-        )
-    # resolve parents (path compression)
+        raise InputError(f"Ward clustering: the adjacency graph is disconnected; stopped at "
+                         f"{n_alive} clusters")
     root = np.array(parent)
-    while True:
-        nxt = root[root]
-        if np.array_equal(nxt, root):
-            break
-        root = nxt
-    _, labels = np.unique(root, return_inverse=True)
-    roots = np.unique(root)
-    cw = w[roots]
-    cc = s[roots] / cw[:, None]
-    return labels.reshape(-1), cw, cc
+    while not np.array_equal(root[root], root):  # each node to its cluster's root
+        root = root[root]
+    roots, labels = np.unique(root, return_inverse=True)
+    return labels.reshape(-1), w[roots], s[roots] / w[roots, None]
 
 
 def _block_graph(rho, block_px):
@@ -296,10 +288,11 @@ def _voxel_sites(flat, shape, sp):
 def ward_sites_3d(rho, n_sites, spacing=(1.0, 1.0, 1.0), ward_block_px=DEFAULTS.ward_block_px):
     """Initial 3D sites by connectivity-constrained, rho-weighted Ward clustering of voxels.
 
-    The voxels are pre-merged into blocks (:func:`ward_block_sides_3d`; 1 = exact Ward on
-    the voxels); :func:`ward_agglomerate` then merges 6-connected blocks, weights the sums
-    of rho, until ``n_sites`` clusters remain; the sites are their rho-weighted centroids
-    in physical coordinates. Blocks coarser than ``n_sites`` fall back to voxels.
+    Voxels are pre-merged into blocks (:func:`ward_block_sides_3d`; 1 = exact Ward), blocks
+    by rounds of reciprocal Ward pairs to 4 clusters per site
+    (:func:`ctseg._ward.reciprocal_premerge`), then :func:`ward_agglomerate` merges to
+    ``n_sites`` (weights: sums of rho); the sites are the clusters' rho-weighted centroids,
+    physical. Blocks coarser than ``n_sites`` fall back to voxels.
 
     Parameters
     ----------
@@ -334,6 +327,8 @@ def ward_sites_3d(rho, n_sites, spacing=(1.0, 1.0, 1.0), ward_block_px=DEFAULTS.
     w, c, e = _block_graph_3d(rho, sp, sides)
     if len(w) < n_sites:  # blocks too coarse for this many sites: fall back to voxels
         w, c, e = _block_graph_3d(rho, sp, (1, 1, 1))
+    elif max(sides) > 1 and len(w) > ROUNDS_PER_SITE * n_sites:
+        w, c, e = reciprocal_premerge(w, c, e, ROUNDS_PER_SITE * n_sites)
     _, _, centroids = ward_agglomerate(w, c, e, n_sites)
     hi = (np.array(rho.shape[::-1]) - 1) * sp  # a weighted mean can round past the box
     return np.clip(centroids, 0.0, hi)

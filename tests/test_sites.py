@@ -6,6 +6,7 @@ import pytest
 from ctseg import density_random_sites, lloyd_cvt, random_sites, ward_sites
 from ctseg.errors import ParameterError
 from ctseg.params import AUTO, SPECS
+from ctseg._ward import ROUND_SHARE, reciprocal_premerge
 from ctseg.sites import INIT_METHODS, default_ward_block_px, initial_sites, ward_agglomerate
 
 from oracles import ward_cost
@@ -64,6 +65,57 @@ def test_ward_matches_naive_reference(seed):
             m = labels == c
             assert np.isclose(cw[c], w[m].sum())
             np.testing.assert_allclose(cc[c], (w[m, None] * pts[m]).sum(0) / w[m].sum())
+
+
+def naive_rounds(weights, points, edges, n_clusters, share):
+    """Slow reference of the reciprocal-pair rounds: clusters as sets, every cost from the
+    members, each round's pairs ranked by (cost, smaller member)."""
+    clusters = {i: {i} for i in range(len(weights))}  # keyed by their smallest node
+    adj = {frozenset(e) for e in map(tuple, edges)}
+
+    def stats(c):
+        idx = sorted(c)
+        w = weights[idx].sum()
+        return w, (weights[idx, None] * points[idx]).sum(axis=0) / w
+
+    while len(clusters) > n_clusters:
+        best = {}
+        for a, b in itertools.combinations(sorted(clusters), 2):
+            if not any(frozenset((i, j)) in adj for i in clusters[a] for j in clusters[b]):
+                continue
+            cost = ward_cost(*stats(clusters[a]), *stats(clusters[b]))
+            for x, y in ((a, b), (b, a)):
+                if x not in best or (cost, y) < best[x]:
+                    best[x] = (cost, y)
+        pairs = sorted((c, a, b) for a, (c, b) in best.items() if a < b and best[b][1] == a)
+        if not pairs:
+            break
+        keep = min(max(1, int(np.ceil(share * len(pairs)))), len(clusters) - n_clusters)
+        for _, a, b in pairs[:keep]:
+            clusters[a] |= clusters.pop(b)
+    return sorted(tuple(sorted(c)) for c in clusters.values())
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_reciprocal_premerge_matches_slow_reference(seed):
+    """The rounds' clusters, weights, centroids and adjacency against the set-based
+    reference."""
+    rng = np.random.default_rng(seed)
+    pts, edges = grid_graph(7, 8)
+    w = rng.uniform(0.1, 2.0, len(pts))
+    w[:10] = 1.0  # equal weights in a row: cost ties, broken by index
+    for k in (1, 9, 30, 55):
+        cw, cc, ce = reciprocal_premerge(w, pts, edges, k)
+        want = naive_rounds(w, pts, edges, k, ROUND_SHARE)
+        assert len(cw) == len(want) == k
+        label = np.empty(len(w), int)
+        for c, members in enumerate(want):  # numbered in node order
+            m = np.array(members)
+            label[m] = c
+            assert np.isclose(cw[c], w[m].sum())
+            np.testing.assert_allclose(cc[c], (w[m, None] * pts[m]).sum(0) / w[m].sum())
+        cross = np.sort(label[edges], axis=1)
+        assert np.array_equal(ce, np.unique(cross[cross[:, 0] != cross[:, 1]], axis=0))
 
 
 def test_ward_sites_count_and_inside():
