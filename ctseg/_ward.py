@@ -343,3 +343,26 @@ def _relink(parent, ea, eb, e, m, most):
             eb[e] = key[k] % m
             e += 1
     return e
+
+
+@njit(cache=True)
+def _block_sums_3d(rho, sides, spacing):
+    """Per block of ``sides`` (z, y, x) voxels: the sum of rho and the rho-weighted sums of
+    the physical x, y, z (rows 0-3), added in voxel order (as np.bincount adds them)."""
+    nz, ny, nx = rho.shape
+    nby = -(-ny // sides[1])
+    nbx = -(-nx // sides[2])
+    out = np.zeros((4, -(-nz // sides[0]) * nby * nbx))
+    for k in range(nz):
+        z = k * spacing[2]
+        for j in range(ny):
+            y = j * spacing[1]
+            row = ((k // sides[0]) * nby + j // sides[1]) * nbx
+            for i in range(nx):
+                b = row + i // sides[2]
+                r = rho[k, j, i]
+                out[0, b] += r
+                out[1, b] += r * (i * spacing[0])
+                out[2, b] += r * y
+                out[3, b] += r * z
+    return out

@@ -3,7 +3,7 @@ SPEC 2; on voxels SPEC 9.2)."""
 import numpy as np
 
 from ._validate import check_number, check_spacing
-from ._ward import ROUNDS_PER_SITE, _ward_merges, reciprocal_premerge
+from ._ward import ROUNDS_PER_SITE, _block_sums_3d, _ward_merges, reciprocal_premerge
 from .errors import InputError, ParameterError
 from .params import AUTO, DEFAULTS, SPECS, check
 
@@ -267,17 +267,14 @@ def _block_graph_3d(rho, sp, sides):
     """Pre-merge voxels into blocks of ``sides`` (z, y, x) voxels: weights, physical
     weighted centroids (x, y, z) and the 6-connected block adjacency."""
     nb = tuple(-(-n // b) for n, b in zip(rho.shape, sides))
-    kk, jj, ii = np.indices(rho.shape)
-    block = np.ravel_multi_index((kk // sides[0], jj // sides[1], ii // sides[2]), nb).ravel()
-    r = rho.ravel()
-    n_blocks = int(np.prod(nb))
-    w = np.bincount(block, r, n_blocks)
-    cols = [np.bincount(block, r * (q.ravel() * s), n_blocks) / w
-            for q, s in ((ii, sp[0]), (jj, sp[1]), (kk, sp[2]))]
-    ids = np.arange(n_blocks).reshape(nb)
+    sums = _block_sums_3d(np.ascontiguousarray(rho, np.float64), np.array(sides, np.int64),
+                          np.asarray(sp, np.float64))
+    w = sums[0]
+    cols = sums[1:] / w
+    ids = np.arange(w.size).reshape(nb)
     e = np.concatenate([np.column_stack([a.ravel(), b.ravel()]) for a, b in (
         (ids[:, :, :-1], ids[:, :, 1:]), (ids[:, :-1], ids[:, 1:]), (ids[:-1], ids[1:]))])
-    return w, np.column_stack(cols), e
+    return w, np.ascontiguousarray(cols.T), e
 
 
 def _voxel_sites(flat, shape, sp):
