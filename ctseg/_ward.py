@@ -5,7 +5,9 @@ Private: :func:`ctseg.sites.ward_agglomerate` and :func:`ctseg.sites.ward_sites_
 the entry points.
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from . import _threads
 
 _ARITY = 4  # children per heap node: half the depth of a binary heap, fewer cache misses
 
@@ -27,7 +29,8 @@ def reciprocal_premerge(weights, centroids, edges, n_clusters):
     s = np.ascontiguousarray(np.asarray(centroids, np.float64) * w[:, None])
     edges = np.asarray(edges, np.int64).reshape(-1, 2)
     ea, eb = np.ascontiguousarray(edges[:, 0]), np.ascontiguousarray(edges[:, 1])
-    parent, _, n_edges = _reciprocal_rounds(w, s, ea, eb, int(n_clusters), ROUND_SHARE)
+    parent, _, n_edges = _reciprocal_rounds(w, s, ea, eb, int(n_clusters), ROUND_SHARE,
+                                            _threads.workers())
     roots = np.flatnonzero(parent == np.arange(len(w)))
     index = np.full(len(w), -1, np.int64)
     index[roots] = np.arange(len(roots))
@@ -249,7 +252,7 @@ def _ward_pair_cost(w, s, i, j):
 
 
 @njit(cache=True)
-def _reciprocal_rounds(w, s, ea, eb, n_target, share):
+def _reciprocal_rounds(w, s, ea, eb, n_target, share, n_threads):
     """Merge reciprocal nearest neighbours of the graph (ea[k], eb[k]) in rounds until
     n_target clusters remain (or no edge joins two).
 
@@ -267,23 +270,15 @@ def _reciprocal_rounds(w, s, ea, eb, n_target, share):
     n_nodes = m
     best = np.empty(m, np.int64)
     best_cost = np.empty(m)
+    n_parts = max(1, min(n_threads, e // 65536))
+    part_best = np.empty((n_parts, m), np.int64)
+    part_cost = np.empty((n_parts, m))
     pa = np.empty(m, np.int64)
     pb = np.empty(m, np.int64)
     pc = np.empty(m)
     while n_nodes > n_target and e > 0:
-        for q in range(n_nodes):
-            best_cost[nodes[q]] = np.inf
-            best[nodes[q]] = m
-        for k in range(e):
-            a = ea[k]
-            b = eb[k]
-            c = _ward_pair_cost(w, s, min(a, b), max(a, b))
-            if c < best_cost[a] or (c == best_cost[a] and b < best[a]):
-                best_cost[a] = c
-                best[a] = b
-            if c < best_cost[b] or (c == best_cost[b] and a < best[b]):
-                best_cost[b] = c
-                best[b] = a
+        _cheapest_neighbours(w, s, ea, eb, e, nodes, n_nodes, part_best, part_cost, best,
+                             best_cost)
         n = 0
         for q in range(n_nodes):
             a = nodes[q]
@@ -314,6 +309,43 @@ def _reciprocal_rounds(w, s, ea, eb, n_target, share):
                 n += 1
         n_nodes = n
     return parent, n_nodes, e
+
+
+@njit(cache=True, parallel=True)
+def _cheapest_neighbours(w, s, ea, eb, e, nodes, n_nodes, part_best, part_cost, best,
+                         best_cost):
+    """Each live node's cheapest neighbour over the first e edges and its Ward cost (ties:
+    the smaller index; m for none). The edges are split among the rows of ``part_best``,
+    ``part_cost``, each part's best found apart and then the parts' best: the order
+    (cost, index) is total, so the split changes nothing."""
+    m = w.shape[0]
+    n_parts = part_best.shape[0]
+    for t in prange(n_parts):
+        pb = part_best[t]
+        pc = part_cost[t]
+        for q in range(n_nodes):
+            pc[nodes[q]] = np.inf
+            pb[nodes[q]] = m
+        for k in range(t * e // n_parts, (t + 1) * e // n_parts):
+            a = ea[k]
+            b = eb[k]
+            c = _ward_pair_cost(w, s, min(a, b), max(a, b))
+            if c < pc[a] or (c == pc[a] and b < pb[a]):
+                pc[a] = c
+                pb[a] = b
+            if c < pc[b] or (c == pc[b] and a < pb[b]):
+                pc[b] = c
+                pb[b] = a
+    for q in prange(n_nodes):
+        a = nodes[q]
+        c = part_cost[0, a]
+        b = part_best[0, a]
+        for t in range(1, n_parts):
+            if part_cost[t, a] < c or (part_cost[t, a] == c and part_best[t, a] < b):
+                c = part_cost[t, a]
+                b = part_best[t, a]
+        best_cost[a] = c
+        best[a] = b
 
 
 @njit(cache=True)

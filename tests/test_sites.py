@@ -258,3 +258,23 @@ def test_ward_merge_order_is_the_lazy_heaps_with_its_ties(uniform):
         labels, _, _ = ward_agglomerate(w, pts, edges, k)
         got = sorted(tuple(np.flatnonzero(labels == c)) for c in range(k))
         assert got == heapq_ward(w, pts, edges, k)
+
+
+def test_reciprocal_rounds_same_on_any_thread_count():
+    """The edges shared among threads find the same cheapest neighbours: the same merges."""
+    from ctseg._ward import _reciprocal_rounds
+    from ctseg.sites import _block_graph_3d
+
+    rho = np.random.default_rng(3).uniform(0.05, 1.0, (60, 64, 66))
+    rho[:, :, :30] = 0.5  # flat: equal costs, ties broken by index
+    w, c, e = _block_graph_3d(rho, np.ones(3), (1, 1, 1))
+    assert len(e) > 4 * 65536  # several parts
+    runs = []
+    for n_threads in (1, 2, 4):
+        wt, st = w.copy(), np.ascontiguousarray(c * w[:, None])
+        ea, eb = e[:, 0].copy(), e[:, 1].copy()
+        parent, n_left, n_edges = _reciprocal_rounds(wt, st, ea, eb, 2000, ROUND_SHARE, n_threads)
+        runs.append((parent, n_left, wt, st, ea[:n_edges], eb[:n_edges]))
+    assert runs[0][1] == 2000
+    for other in runs[1:]:
+        assert all(np.array_equal(a, b) for a, b in zip(runs[0], other))
