@@ -21,11 +21,13 @@ from . import _threads
 # the faces of tetrahedron (0, 1, 2, 3), as in ctseg.tetrahedra
 _FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 
-_QHULL_JITTER = 1e-10
+_QHULL_JITTER = 1e-8
 """Qhull triangulates a copy of the sites moved by up to this share of the box's diagonal:
 exactly coplanar sites on the box's faces (and near-cospherical near-regular ones) send it
 into its slow facet merging, four times the time of as many sites inside; the copy's
-tetrahedra are the exact sites' wherever those are not flat."""
+tetrahedra are the exact sites' wherever those are not flat. At 1e-10 the CVT's
+near-regular sites were still within Qhull's round-off often enough to keep it merging
+(README, *Accuracy in 3D*); the move stays far below any tetrahedron's size."""
 
 _SPHERE_MARGIN = 1e-6
 """A tetrahedron whose circumsphere a moved site misses by less than this share of its
