@@ -106,8 +106,8 @@ def _three_nearest_3d(x, y, z, h, gx, gy, gz, start, items, coords):
 
     Ties go to the lower site index. Cells are visited in cubic shells around the point's
     cell until the shell's inner distance exceeds the third-best distance. A row of a
-    shell's cells is one run of :func:`_site_grid_3d`'s slots (its sites side by side: the
-    search reads memory in order, 1.5x faster than through the site index).
+    shell's cells is one run of :func:`_site_grid_3d`'s slots, its sites side by side, so
+    the search reads memory in order instead of through the site index.
     """
     cx = min(max(int(x / h), 0), gx - 1)
     cy = min(max(int(y / h), 0), gy - 1)

@@ -289,6 +289,8 @@ def _reciprocal_rounds(w, s, ea, eb, n_target, share, n_threads):
                 pc[n] = best_cost[a]
                 n += 1
         keep = min(max(1, int(np.ceil(share * n))), n_nodes - n_target, n)
+        if keep == 0:  # cannot happen: the cheapest edge by (cost, ends) is a reciprocal pair
+            break
         if keep < n:  # a stable sort: equal costs keep the smaller first index first
             sel = np.sort(np.argsort(pc[:n], kind="mergesort")[:keep])
             for q in range(keep):
@@ -352,8 +354,8 @@ def _cheapest_neighbours(w, s, ea, eb, e, nodes, n_nodes, part_best, part_cost, 
 def _relink(parent, ea, eb, e, m, most):
     """The first e edges moved onto the clusters their nodes merged into this round, those
     inside one cluster dropped; once there are more than ``most``, one edge per pair of
-    clusters is kept (the block graph's many edges between two clusters cost a cost
-    each, every round). Returns the new count."""
+    clusters is kept (two clusters of blocks share many edges, and each edge's cost is
+    computed every round). Returns the new count."""
     n = 0
     for k in range(e):
         a = parent[ea[k]]
