@@ -268,14 +268,10 @@ def _reciprocal_rounds(w, s, ea, eb, n_target, share, n_threads):
     parent = np.arange(m)
     nodes = np.arange(m)  # the live clusters
     n_nodes = m
-    best = np.empty(m, np.int64)
-    best_cost = np.empty(m)
+    best, best_cost = np.empty(m, np.int64), np.empty(m)
     n_parts = max(1, min(n_threads, e // 65536))
-    part_best = np.empty((n_parts, m), np.int64)
-    part_cost = np.empty((n_parts, m))
-    pa = np.empty(m, np.int64)
-    pb = np.empty(m, np.int64)
-    pc = np.empty(m)
+    part_best, part_cost = np.empty((n_parts, m), np.int64), np.empty((n_parts, m))
+    pa, pb, pc = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m)
     while n_nodes > n_target and e > 0:
         _cheapest_neighbours(w, s, ea, eb, e, nodes, n_nodes, part_best, part_cost, best,
                              best_cost)
