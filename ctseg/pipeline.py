@@ -5,6 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._allocation import release_free_heap
 from ._validate import as_image
 from .beam_hardening import correct_streaks
 from .boundary import chain_polylines, material_boundary
@@ -35,6 +36,7 @@ def stage_runner(report, times, peaks_mib=None):
     is sampled, not traced: tracing every allocation would slow every stage."""
     def timed(name, frac, fn, *a, **k):
         report(frac, name)  # the stage that starts now, and the share of the work done
+        release_free_heap()
         probe = PeakRss() if peaks_mib is not None else nullcontext()
         t0 = time.perf_counter()
         try:

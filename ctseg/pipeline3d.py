@@ -8,6 +8,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ._allocation import bulk_allocations
 from ._validate import as_volume, check_spacing
 from .beam_hardening import correct_streaks_volume
 from .errors import InputError
@@ -92,6 +93,7 @@ def check_shape_3d(shape, name="volume"):
                          f"{axis} work: axis='{axis}', CLI --axis {axis})")
 
 
+@bulk_allocations()
 def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **overrides):
     """Segment a volume into tetrahedra with one material each, and closed surfaces.
 
@@ -161,6 +163,9 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     labelling, whose blur the correction predicts, leaves out the thin-layer rules (a
     band of blurred-edge elements with an intermediate gray must not predict a layer of
     the intermediate material); the second labelling applies them.
+
+    While it runs, large arrays reuse the C heap instead of fresh page mappings
+    (:func:`ctseg._allocation.bulk_allocations`); the results do not depend on it.
 
     Example
     -------
