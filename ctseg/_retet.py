@@ -17,6 +17,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from . import _threads
+from ._sets import unique_ints
 
 # the faces of tetrahedron (0, 1, 2, 3), as in ctseg.tetrahedra
 _FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
@@ -155,7 +156,7 @@ def local_delaunay(old, new, tets, moved, box, options, flat_rel, spheres=None):
     is_moved[moved] = True
     cavity = (dist <= radius * (1.0 + _SPHERE_MARGIN)) | is_moved[tets].any(axis=1)
     cav = tets[cavity]
-    local = np.unique(cav)
+    local = unique_ints(cav)
     if len(local) < 5:
         return None, None
     try:

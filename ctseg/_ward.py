@@ -8,6 +8,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import _threads
+from ._sets import unique_ints
 
 _ARITY = 4  # children per heap node: half the depth of a binary heap, fewer cache misses
 
@@ -35,7 +36,7 @@ def reciprocal_premerge(weights, centroids, edges, n_clusters):
     index = np.full(len(w), -1, np.int64)
     index[roots] = np.arange(len(roots))
     a, b = index[ea[:n_edges]], index[eb[:n_edges]]
-    key = np.unique(np.minimum(a, b) * len(roots) + np.maximum(a, b))
+    key = unique_ints(np.minimum(a, b) * len(roots) + np.maximum(a, b))
     return (w[roots], s[roots] / w[roots, None],
             np.column_stack([key // len(roots), key % len(roots)]))
 

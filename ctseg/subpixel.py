@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter, map_coordinates
 
+from ._sets import unique_ints
 from .errors import InputError, ParameterError
 from .params import DEFAULTS
 from .recursive_cut import order_by_gray
@@ -63,7 +64,7 @@ def _vertex_materials(elements, material, n_points):
     different ones (-1, -1, 0 for a vertex of no element)."""
     k = int(material.max()) + 1 if len(material) else 1
     # distinct (vertex, material) pairs as one sorted integer key each
-    key = np.unique(elements.ravel() * k + np.repeat(material, elements.shape[1]))
+    key = unique_ints(elements.ravel() * k + np.repeat(material, elements.shape[1]))
     vertex, mat = key // k, key % k
     count = np.bincount(vertex, minlength=n_points)
     lo = np.full(n_points, -1)

@@ -6,6 +6,7 @@ import numpy as np
 
 from ._retet import (circumspheres, delaunay_simplices, flat_off_face, local_delaunay,
                      packed_keys)
+from ._sets import unique_ints
 from .errors import MeshCheckError
 
 # |volume| below this share of the mean tetrahedron volume counts as flat (zero volume
@@ -194,7 +195,7 @@ def _check_cover(pts, tets, vol, box):
     if abs(vol.sum() - total) > 1e-9 * total:
         raise MeshCheckError(f"tetrahedra: they fill {vol.sum():.12g} of the box's "
                              f"{total:.12g} (a corner site missing?)")
-    used = np.unique(tets)
+    used = unique_ints(tets)
     if len(used) != len(pts):
         raise MeshCheckError(f"tetrahedra: {len(pts) - len(used)} site(s) are no vertex "
                              "(coincident sites)")
@@ -284,7 +285,7 @@ def perturb_slivers(sites, box, min_dihedral_deg, rounds, seed):
         if best_key[0] == 0:
             break
         pts = best_pts.copy()
-        bad = np.unique(best_tets[angle < min_dihedral_deg])
+        bad = unique_ints(best_tets[angle < min_dihedral_deg])
         shortest = _shortest_edges(pts, best_tets, bad)
         free = ~((np.abs(pts[bad]) <= tol) | (np.abs(pts[bad] - box) <= tol))
         step = rng.uniform(-SLIVER_STEP, SLIVER_STEP, (len(bad), 3)) * shortest[:, None] * free
