@@ -130,6 +130,7 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
                               density_saturation=p.density_saturation, density_ridge=0.0)
     flat = (strength - p.density_floor) < 0.5
     interior = overlaps.tetra_mean(flat.astype(np.float64)) >= 0.5
+    del strength, flat  # volumes the later stages do not need: a lower peak
     cut["interior"] = interior
     # the first pass without the thin-layer rules: a band of blurred-edge elements with an
     # intermediate gray must not predict a layer to the blur correction

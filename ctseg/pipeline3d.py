@@ -199,6 +199,9 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     rho = timed("density", 0.05, density_3d, image, p, sp)
     cvt = cvt_sites_3d(rho, p, sp, n_sites=n_sites, timed=timed,
                        progress=lambda it, n: report(0.2 + 0.5 * it / max(n, 1), "cvt"))
+    # the density and the voxels' region labels are done with: the labelling's peak is lower
+    del rho
+    cvt = replace(cvt, labels=None)
     mesh, slivers = timed("tetrahedra", 0.7, tetrahedra_3d, cvt.sites, image.shape, p, sp)
 
     def gray_of():  # the overlaps, kept for every later mean over the mesh

@@ -191,3 +191,27 @@ def test_level_changes_are_the_max_minus_min_filter_rule(shape):
         out = np.empty(shape, bool)
         kernel(lev, out)
         assert np.array_equal(out, expected)
+
+
+def test_self_weight_3d_is_the_rule_on_face_areas_and_volume():
+    # slow reference: each face's area from the outward faces, the volume from its formula
+    from ctseg.blur import self_weight_3d
+    from ctseg.tetrahedra import delaunay_tetrahedra, tetra_faces, tetra_volumes
+
+    rng = np.random.default_rng(3)
+    corners = np.array([[x, y, z] for x in (0, 9) for y in (0, 9) for z in (0, 9)], float)
+    mesh = delaunay_tetrahedra(np.vstack([corners, rng.uniform(0, 9, (80, 3))]), (9, 9, 9))
+    sigma = 0.8
+    got = self_weight_3d(mesh.points, mesh.tetrahedra, sigma)
+    expected = []
+    for t, tet in enumerate(mesh.tetrahedra):
+        faces = tetra_faces(tet[None])
+        area = sum(0.5 * np.linalg.norm(np.cross(mesh.points[f[1]] - mesh.points[f[0]],
+                                                 mesh.points[f[2]] - mesh.points[f[0]]))
+                   for f in faces)
+        vol = abs(tetra_volumes(mesh.points, tet[None])[0])
+        expected.append(1.0 - area * sigma / (np.sqrt(2.0 * np.pi) * vol))
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)
+    # a scaled copy: area over volume falls as 1 / scale
+    np.testing.assert_allclose(1.0 - self_weight_3d(2.0 * mesh.points, mesh.tetrahedra, sigma),
+                               0.5 * (1.0 - got), rtol=1e-9)
