@@ -91,12 +91,13 @@ def density_map(image, density_sigma_px=DEFAULTS.density_sigma_px,
                               2 * int(np.ceil(max(sigma, 0.5))) + 1)
 
 
-def _rho_from_gradient(mag, floor, saturation, ridge, size):
+def _rho_from_gradient(mag, floor, saturation, ridge, size, scale=None):
     """The normalisation and ridge sharpening shared by the 2D and 3D maps: rho from the
-    gradient magnitude ``mag``; ``size`` is the ridge window (an int or one per axis)."""
+    gradient magnitude ``mag``; ``size`` is the ridge window (an int or one per axis);
+    ``scale``: :func:`_gradient_scale` of ``mag`` if the caller has it already."""
     if mag.max() == 0.0:
         return np.full(mag.shape, floor)
-    g_noise, g_ref = _gradient_scale(mag, saturation)
+    g_noise, g_ref = _gradient_scale(mag, saturation) if scale is None else scale
     strength = np.clip((mag - g_noise) / (g_ref - g_noise), 0.0, 1.0)
     if ridge:
         local = ndimage.maximum_filter(mag, size=size, mode="nearest")
@@ -226,10 +227,10 @@ def _flat_and_scale(smooth, floor, saturation):
     density) gradients :func:`density_map` normalises its gradient with."""
     gy, gx = np.gradient(smooth)
     mag = np.hypot(gx, gy)
-    flat = (_rho_from_gradient(mag, floor, saturation, 0.0, 1) - floor) < 0.5
     if mag.max() == 0.0:
-        return flat, 0.0, np.inf
-    return (flat, *_gradient_scale(mag, saturation))
+        return np.ones(mag.shape, bool), 0.0, np.inf
+    scale = _gradient_scale(mag, saturation)  # a median: once per slice
+    return (_rho_from_gradient(mag, floor, saturation, 0.0, 1, scale) - floor) < 0.5, *scale
 
 
 def flat_voxels(stack, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAULTS.density_floor,
