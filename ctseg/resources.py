@@ -22,10 +22,11 @@ LEVEL_BYTES_PER_VOXEL = 48
 """Working memory per voxel of the slices that measure a volume's material levels."""
 
 VOLUME_3D_BYTES_PER_VOXEL = 400
-"""Peak resident memory of the 3D mode per voxel, with a margin of 1.6-2x:
-benchmarks/volume3d.py measured 1001 MiB for a 160^3 volume and 3241 MiB for 256^3, 256
-and 203 bytes per voxel with the input and the interpreter
-(benchmarks/results/volume3d_ctseg3d.md). A 512^3 volume is refused below 50 GiB."""
+"""Peak resident memory of the 3D mode per voxel, with a margin of 2-2.5x:
+benchmarks/volume3d.py measured 774 MiB for a 160^3 volume and 2560 MiB for 256^3, 198
+and 160 bytes per voxel with the input and the interpreter
+(benchmarks/results/volume3d_ctseg3d.md; 256 and 203 before the 3D mode kept its heap
+and freed its density early). A 512^3 volume is refused below 50 GiB."""
 
 
 SITE_3D_BYTES = 12 * 1024
