@@ -22,6 +22,7 @@ from .errors import ParameterError
 from .graph import connected_pieces
 from .params import DEFAULTS, check
 from .tetra_gray import VoxelOverlaps, tetra_gray, voxel_mean_of_tetrahedra  # noqa: F401 (example)
+from .tetrahedra import tetra_volumes
 from .triangle_gray import pixel_mean_of_triangles, triangle_gray
 from .triangulation import triangle_areas
 
@@ -280,14 +281,15 @@ def self_weight_3d(points, tetrahedra, sigma):
     """Share of a tetrahedron's own signal that a Gaussian blur leaves inside it:
     ``1 - S sigma / (sqrt(2 pi) V)`` for surface area S and volume V (the 2D rule of
     :func:`self_weight` one dimension up; all in voxel units)."""
-    p = np.asarray(points, float)[np.asarray(tetrahedra, np.int64)]
-    # edges from vertex 0 serve three faces and the volume (one gather, not one per face)
+    points = np.asarray(points, float)
+    p = points[np.asarray(tetrahedra, np.int64)]
+    # edges from vertex 0 serve three faces (one gather, not one per face)
     e1, e2, e3 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]
-    n0 = np.cross(e1, e2)
     twice_area = (np.linalg.norm(np.cross(p[:, 2] - p[:, 1], p[:, 3] - p[:, 1]), axis=1)
                   + np.linalg.norm(np.cross(e3, e2), axis=1)
-                  + np.linalg.norm(np.cross(e1, e3), axis=1) + np.linalg.norm(n0, axis=1))
-    vol = np.abs(np.einsum("ij,ij->i", n0, e3)) / 6.0
+                  + np.linalg.norm(np.cross(e1, e3), axis=1)
+                  + np.linalg.norm(np.cross(e1, e2), axis=1))
+    vol = np.abs(tetra_volumes(points, tetrahedra))
     return 1.0 - 0.5 * twice_area * float(sigma) / (np.sqrt(2.0 * np.pi) * np.maximum(vol, 1e-300))
 
 

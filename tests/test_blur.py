@@ -204,7 +204,7 @@ def test_self_weight_3d_is_the_rule_on_face_areas_and_volume():
     sigma = 0.8
     got = self_weight_3d(mesh.points, mesh.tetrahedra, sigma)
     expected = []
-    for t, tet in enumerate(mesh.tetrahedra):
+    for tet in mesh.tetrahedra:
         faces = tetra_faces(tet[None])
         area = sum(0.5 * np.linalg.norm(np.cross(mesh.points[f[1]] - mesh.points[f[0]],
                                                  mesh.points[f[2]] - mesh.points[f[0]]))
