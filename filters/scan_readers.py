@@ -241,27 +241,41 @@ def _read_metaimage(path):
     except (KeyError, ValueError):
         raise InputError(f"{path}: not a readable MetaImage file (DimSize, ElementType or "
                          "ElementDataFile missing or malformed)") from None
+    # checked here: vtkMetaImageReader crashes the process on some of these headers, and
+    # on others returns memory it never filled
+    if n not in (2, 3) or fields.get("NDims", str(n)).strip() != str(n) or min(dims) < 1:
+        raise InputError(f"{path}: MetaImage DimSize {fields['DimSize']!r} (NDims "
+                         f"{fields.get('NDims', '?')}): need 2 or 3 sizes >= 1, as many as NDims")
+    compressed = fields.get("CompressedData", "False").lower() == "true"
+    if compressed and "CompressedDataSize" not in fields:
+        raise InputError(f"{path}: compressed MetaImage data without CompressedDataSize "
+                         "(VTK's reader needs it; ITK and SimpleITK write it)")
+    if source.startswith("LIST") or "%" in source:
+        raise InputError(f"{path}: MetaImage slices in several files (ElementDataFile = "
+                         f"{source.split()[0]}) are not supported; save the volume as one "
+                         ".mha file (e.g. SimpleITK.WriteImage)")
     if source == "LOCAL":
         data = raw[pos:]
-    elif source.startswith("LIST") or "%" in source:
-        data = None  # slices in several files: VTK checks those
     else:
         data_path = os.path.join(os.path.dirname(path), source)
         if not os.path.isfile(data_path):
             raise InputError(f"{path}: its data file {data_path} does not exist")
         with open(data_path, "rb") as fh:
             data = fh.read()
-    if data is not None:
-        need = int(np.prod(dims)) * elem
-        if fields.get("CompressedData", "False").lower() == "true":
-            try:
-                have = len(zlib.decompressobj().decompress(data))
-            except zlib.error as exc:
-                raise InputError(f"{path}: corrupt MetaImage data ({exc})") from None
-        else:
-            have = len(data)
-        if have < need:
-            raise InputError(f"{path}: truncated MetaImage data ({have} of {need} bytes)")
+    need = int(np.prod(dims)) * elem
+    if compressed:
+        try:
+            size = int(fields["CompressedDataSize"])
+            have = len(zlib.decompressobj().decompress(data[:size])) if 0 < size <= len(data) else -1
+        except (ValueError, zlib.error) as exc:
+            raise InputError(f"{path}: corrupt MetaImage data ({exc})") from None
+        if have < 0:
+            raise InputError(f"{path}: CompressedDataSize {fields['CompressedDataSize']} does not "
+                             f"fit the {len(data)} bytes of data")
+    else:
+        have = len(data)
+    if have < need:
+        raise InputError(f"{path}: truncated MetaImage data ({have} of {need} bytes)")
     arr, _ = _read_vtk_image(vtkMetaImageReader, path, "MetaImage")
     direction = np.eye(3)
     direction[:n, :n] = axes.T

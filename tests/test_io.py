@@ -215,6 +215,36 @@ def test_metaimage_geometry_as_itk_reads_it(tmp_path, compressed):
         read_image(tmp_path / "cut.mha")
 
 
+@pytest.mark.parametrize("header,match", [
+    ("NDims = 4\nDimSize = 2 4 3 2\n", "need 2 or 3 sizes"),
+    ("NDims = 3\nDimSize = 4 -3 2\n", "need 2 or 3 sizes"),
+    ("NDims = 3\nDimSize = 4 3\n", "need 2 or 3 sizes"),
+    ("NDims = 3\nDimSize = 4 3 2\nCompressedData = True\n", "without CompressedDataSize"),
+    ("NDims = 3\nDimSize = 4 3 2\nCompressedData = True\nCompressedDataSize = 9999\n",
+     "does not fit"),
+])
+def test_metaimage_headers_vtk_cannot_read_are_refused(tmp_path, header, match):
+    """Headers on which vtkMetaImageReader aborts the process (4 sizes, a negative one) or
+    returns memory it never filled (compressed data without its size) get an InputError."""
+    body = _volume((2, 3, 4)).astype("<i2").tobytes()
+    if "CompressedData =" in header:
+        body = zlib.compress(body)
+    (tmp_path / "v.mha").write_bytes(
+        ("ObjectType = Image\n" + header + "ElementType = MET_SHORT\nElementDataFile = LOCAL\n"
+         ).encode() + body)
+    with pytest.raises(InputError, match=match):
+        read_image(tmp_path / "v.mha")
+
+
+def test_metaimage_slice_list_is_refused(tmp_path):
+    (tmp_path / "s0.raw").write_bytes(_volume((1, 3, 4)).astype("<i2").tobytes())
+    (tmp_path / "v.mhd").write_text("ObjectType = Image\nNDims = 3\nDimSize = 4 3 2\n"
+                                    "ElementType = MET_SHORT\nElementDataFile = LIST\ns0.raw\n"
+                                    "missing.raw\n")
+    with pytest.raises(InputError, match="several files"):
+        read_image(tmp_path / "v.mhd")
+
+
 def test_vti_round_trip_with_direction(tmp_path, ext=".vti"):
     from vtkmodules.vtkIOXML import vtkXMLImageDataWriter
 
