@@ -83,7 +83,7 @@ class Param:
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
             raise bad
         if self.kind == "int":
-            if float(value) != int(value):
+            if not np.isfinite(float(value)) or float(value) != int(value):
                 raise bad
             value = int(value)
         else:

@@ -304,7 +304,11 @@ def params_from_args(args):
                 data = json.load(fh)
         except (OSError, ValueError) as exc:
             raise ParameterError(f"--params {args.params}: cannot read it as JSON ({exc})") from None
-        base = SegmentParams.from_dict(data.get("parameters", data) if isinstance(data, dict) else data)
+        data = data.get("parameters", data) if isinstance(data, dict) else data
+        if not isinstance(data, dict):
+            raise ParameterError(f"--params {args.params}: expected a JSON object of name: value "
+                                 f"(as a report's \"parameters\"), got {type(data).__name__}")
+        base = SegmentParams.from_dict(data)
     changes = {}
     for item in args.set:
         name, sep, text = item.partition("=")

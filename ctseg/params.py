@@ -142,7 +142,7 @@ class LevelParams(_Group):
     merge_rel: float = _param(0.2, "float", "gray-proportional part of the level separation "
                               "(beam hardening grows with attenuation)", low=0.0, high=10.0)
     merge_floor_255: float = _param(2.0, "float", "smallest level separation", "gray 0-255",
-                                    low=0.0, high=255.0)
+                                    low=0.0, high=255.0, low_open=True)
     merge_threshold_255: float = _param(AUTO, "float", "fixed level separation instead of "
                                         "the rule above; auto = the rule", "gray 0-255",
                                         low=0.0, high=255.0, low_open=True, auto=True)

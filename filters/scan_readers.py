@@ -62,6 +62,21 @@ def _dicom_headers(files, path):
     return headers
 
 
+def _dicom_numbers(ds, tag, n, default, where):
+    """A numeric DICOM attribute of ``n`` values (``default`` where absent); an InputError
+    naming the file and the tag where it holds another count or no numbers."""
+    value = ds.get(tag, default)
+    several = hasattr(value, "__iter__") and not isinstance(value, (str, bytes))
+    values = list(value) if several else [value]  # pydicom gives one value unwrapped
+    try:
+        out = np.array([float(v) for v in values])
+    except (TypeError, ValueError):
+        out = np.zeros(0)
+    if out.shape != (n,) or not np.all(np.isfinite(out)):
+        raise InputError(f"{where}: DICOM {tag} is {value!r}; expected {n} numbers")
+    return out
+
+
 def _dicom_series(path, files, series=None):
     """Read one DICOM series (a list of files, one file or several) as a volume."""
     import pydicom
@@ -81,15 +96,19 @@ def _dicom_series(path, files, series=None):
                          f"--series UID: {listing}")
     else:
         members = next(iter(groups.values()))
-    iop = np.array([float(v) for v in members[0][1].get("ImageOrientationPatient", [1, 0, 0, 0, 1, 0])])
+    iop = _dicom_numbers(members[0][1], "ImageOrientationPatient", 6, [1, 0, 0, 0, 1, 0],
+                         members[0][0])
     row_dir, col_dir = iop[:3], iop[3:]
     normal = np.cross(row_dir, col_dir)
+    if not np.linalg.norm(normal) > 1e-6:
+        raise InputError(f"{members[0][0]}: DICOM ImageOrientationPatient {list(iop)} gives "
+                         "parallel row and column directions")
     shapes = {(int(ds.Rows), int(ds.Columns)) for _, ds in members}
     if len(shapes) != 1:
         raise InputError(f"{path}: the DICOM slices differ in size ({sorted(shapes)})")
 
     def position(ds):
-        return np.array([float(v) for v in ds.get("ImagePositionPatient", [0, 0, 0])])
+        return _dicom_numbers(ds, "ImagePositionPatient", 3, [0, 0, 0], path)
 
     has_pos = all("ImagePositionPatient" in ds for _, ds in members)
     if has_pos:
@@ -116,7 +135,7 @@ def _dicom_series(path, files, series=None):
     vol = np.stack(slices) if slices[0].ndim == 2 else slices[0]
     if len(slices) > 1 and slices[0].ndim != 2:
         raise InputError(f"{path}: several multi-frame DICOM files in one series are not supported")
-    spacing_rc = [float(v) for v in first.get("PixelSpacing", [1, 1])]
+    spacing_rc = _dicom_numbers(first, "PixelSpacing", 2, [1, 1], members[0][0])
     if len(members) > 1 and has_pos:
         z = np.array([position(ds) @ normal for _, ds in members])
         gaps = np.diff(z)

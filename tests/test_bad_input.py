@@ -146,6 +146,9 @@ def test_valid_results(tmp_path, capsys, name, array, n_materials):
     (["--materials", "9"], ["n_materials", "9 materials"]),
     (["--seed", "-1"], ["seed"]),
     (["--jobs", "-2"], ["n_jobs"]),
+    (["--sites", "inf"], ["n_sites"]), (["--sites", "nan"], ["n_sites"]),
+    (["--seed", "inf"], ["seed"]), (["--set", "max_iter=1e400"], ["max_iter"]),
+    (["--set", "merge_floor_255=0"], ["merge_floor_255"]),
 ])
 def test_bad_parameters(tmp_path, capsys, extra, words):
     arr = _disc(24)
@@ -218,6 +221,20 @@ def test_folder_with_mixed_dicom_series(tmp_path, capsys):
         write_ct_dicom(d / f"b{k}.dcm", np.ones((8, 8), np.uint16), instance=k + 5,
                        position=(0, 0, k), series_uid="1.2.3.2")
     assert_refused(tmp_path, capsys, [d, "-o", tmp_path / "m.vtp"], "2 DICOM series", "--series")
+
+
+@pytest.mark.parametrize("orientation,words", [((1, 0, 0), ["ImageOrientationPatient", "6 numbers"]),
+                                               ((1, 0, 0, 1, 0, 0), ["parallel"])])
+def test_bad_dicom_orientation(tmp_path, capsys, orientation, words):
+    write_ct_dicom(tmp_path / "s.dcm", np.zeros((8, 8), np.uint16), orientation=orientation)
+    assert_refused(tmp_path, capsys, [tmp_path / "s.dcm", "-o", tmp_path / "m.vtp"], *words)
+
+
+def test_params_file_that_is_not_an_object(tmp_path, capsys):
+    np.save(tmp_path / "in.npy", _disc(16))
+    (tmp_path / "p.json").write_text("[1, 2]")
+    assert_refused(tmp_path, capsys, [tmp_path / "in.npy", "-o", tmp_path / "m.vtp", "--params",
+                                      tmp_path / "p.json"], "--params", "JSON object")
 
 
 # ------------------------------------------------------------------------ bad outputs
