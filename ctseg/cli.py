@@ -83,10 +83,16 @@ def _check_outputs(args, mode):
             raise ParameterError("--surfaces: the interface triangles are 3D mode's (--mode "
                                  "3d); slices mode writes boundary polylines with --boundary")
         check_output_path(args.output, MESH_FORMATS)
-    for path, exts in ((args.boundary, (".vtp",)), (args.surfaces, (".vtp",)),
-                       (args.figure, (".png",)), (args.report, (".json",))):
+    seen = {os.path.realpath(args.output): "-o"}
+    for flag, path, exts in (("--boundary", args.boundary, (".vtp",)),
+                             ("--surfaces", args.surfaces, (".vtp",)),
+                             ("--figure", args.figure, (".png",)), ("--report", args.report, (".json",))):
         if path:
             check_output_path(path, exts)
+            other = seen.setdefault(os.path.realpath(path), flag)
+            if other != flag:
+                raise ParameterError(f"{flag} {path}: the same file as {other}; one would "
+                                     "overwrite the other")
     if args.figure:
         offscreen_window()  # can this VTK draw here at all?
 

@@ -83,10 +83,20 @@ def atomic_outputs(paths):
             os.close(fd)
             temps.append(tmp)
         yield temps
+        for p in paths:  # a folder in the way would stop the renames half-way
+            if os.path.isdir(p):
+                raise InputError(f"{p}: is a folder; cannot write the file there")
         mode = _file_mode()
-        for tmp, p in zip(temps, paths):
-            os.chmod(tmp, mode)  # mkstemp's 0600 -> what open() would have given
-            os.replace(tmp, p)
+        done = []
+        try:
+            for tmp, p in zip(temps, paths):
+                os.chmod(tmp, mode)  # mkstemp's 0600 -> what open() would have given
+                os.replace(tmp, p)
+                done.append(p)
+        except OSError as exc:
+            for p_done in done:  # the files of one output are all there or none
+                os.unlink(p_done)
+            raise InputError(f"{p}: cannot write it ({exc.strerror})") from None
         temps = []
     finally:
         for tmp in temps:

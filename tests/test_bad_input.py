@@ -258,6 +258,23 @@ def test_bad_side_outputs(tmp_path, capsys, flag, name):
                                       tmp_path / name], "unknown output format", name)
 
 
+def test_one_file_for_two_outputs(tmp_path, capsys):
+    np.save(tmp_path / "in.npy", _disc(16))
+    assert_refused(tmp_path, capsys, [tmp_path / "in.npy", "-o", tmp_path / "m.vtp", "--boundary",
+                                      tmp_path / "m.vtp"], "--boundary", "the same file as -o")
+
+
+@pytest.mark.parametrize("output,blocker", [("y.obj", "y.mtl"), ("z.stl", "z_material1.stl")])
+def test_side_file_blocked_by_a_folder(tmp_path, capsys, output, blocker):
+    """A file written beside the output (OBJ's .mtl, STL's one file per material) that
+    cannot be written leaves no output at all, and says which."""
+    np.save(tmp_path / "in.npy", _disc(24))
+    (tmp_path / blocker).mkdir()
+    rc, err = run(tmp_path, capsys, [tmp_path / "in.npy", "-o", tmp_path / output, "-q"])
+    assert rc == 2 and "Traceback" not in err and blocker in err and "is a folder" in err, err
+    assert sorted(os.listdir(tmp_path)) == sorted(["in.npy", blocker]), os.listdir(tmp_path)
+
+
 def test_too_large_for_memory_fails_before_the_work(tmp_path, capsys, monkeypatch):
     """What cannot fit is refused at once, saying how much it needs and what is there."""
     import ctseg.resources
