@@ -137,9 +137,9 @@ def _mesh(args):
         diag["input"] = os.path.abspath(args.input)
         return _finish(args, image, diag, written)
     if image.ndim == 2:
-        if args.resume:
-            print("ctseg: note: --resume applies to volumes, whose slices are saved as they "
-                  "finish; a single slice is one step and starts afresh", file=sys.stderr)
+        if args.resume or args.dask:
+            print("ctseg: note: --resume and --dask apply to volumes (slice by slice); a single "
+                  "slice is one step and runs here", file=sys.stderr)
         result = segment_array(image, params, progress=progress)
         fig_image, fig_seg, fig_name = image, result, os.path.basename(args.input)
         diag = dict(result.diagnostics)
@@ -228,6 +228,8 @@ def _resume_hint(args):
     if not folder or not os.path.isdir(folder):
         return ""
     n = sum(1 for f in os.listdir(folder) if f.startswith("slice_") and f.endswith(".npz"))
+    if not n:  # stopped before a slice was done: nothing to resume, nothing left behind
+        shutil.rmtree(folder, ignore_errors=True)
     return (f"; {n} finished slice(s) are kept in {folder}: run the same command with "
             "--resume to go on from there") if n else ""
 

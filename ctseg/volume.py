@@ -103,7 +103,7 @@ def _run_dask(tasks, client, on_done):
     if own:
         try:
             client = Client(client, timeout=30)
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, ValueError) as exc:  # ValueError: a malformed address
             raise ParameterError(f"client: cannot reach the Dask scheduler at {client} ({exc})") from None
     try:
         keys = list(tasks)

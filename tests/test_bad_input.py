@@ -230,6 +230,13 @@ def test_bad_dicom_orientation(tmp_path, capsys, orientation, words):
     assert_refused(tmp_path, capsys, [tmp_path / "s.dcm", "-o", tmp_path / "m.vtp"], *words)
 
 
+def test_malformed_dask_address(tmp_path, capsys):
+    arr = _disc(16)
+    np.save(tmp_path / "vol.npy", np.stack([arr, arr]))
+    assert_refused(tmp_path, capsys, [tmp_path / "vol.npy", "-o", tmp_path / "m.vtp", "--mode", "slices",
+                                      "--dask", "notanaddress"], "Dask scheduler", "notanaddress")
+
+
 def test_params_file_that_is_not_an_object(tmp_path, capsys):
     np.save(tmp_path / "in.npy", _disc(16))
     (tmp_path / "p.json").write_text("[1, 2]")
