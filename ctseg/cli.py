@@ -205,6 +205,9 @@ def _json_value(value):
     return value.tolist() if hasattr(value, "tolist") else str(value)
 
 
+MAX_TRUTH_LABEL = 255
+
+
 def _read_truth(path, shape):
     """The truth labels (int64) for --truth, checked against the image's shape first."""
     if not path:
@@ -215,6 +218,16 @@ def _read_truth(path, shape):
     truth = np.asarray(truth)
     if truth.shape != tuple(shape):
         raise InputError(f"{path}: truth shape {truth.shape} differs from the image's {tuple(shape)}")
+    if truth.dtype.kind not in "biuf":
+        raise InputError(f"{path}: truth labels must be numbers, got {truth.dtype}")
+    # labels number materials by ascending gray (0, 1, ...): whole numbers, few of them
+    if not (np.all(np.isfinite(truth)) and np.all(truth == np.round(truth))
+            and truth.min() >= 0 and truth.max() <= MAX_TRUTH_LABEL):
+        finite = truth[np.isfinite(truth)]
+        seen = f"{finite.min():g}..{finite.max():g}" if finite.size else "none finite"
+        raise InputError(f"{path}: truth labels must be whole numbers 0..{MAX_TRUTH_LABEL} "
+                         f"(material 0, 1, ... by ascending gray); got values {seen}"
+                         + (", NaN or infinite ones" if finite.size < truth.size else ""))
     return truth.astype(np.int64)
 
 

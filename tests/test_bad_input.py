@@ -230,6 +230,18 @@ def test_bad_dicom_orientation(tmp_path, capsys, orientation, words):
     assert_refused(tmp_path, capsys, [tmp_path / "s.dcm", "-o", tmp_path / "m.vtp"], *words)
 
 
+@pytest.mark.parametrize("truth,word", [(np.full((16, 16), 0.5), "whole numbers"),
+                                         (np.full((16, 16), -1), "whole numbers"),
+                                         (np.full((16, 16), np.nan), "whole numbers"),
+                                         (np.full((16, 16), 10 ** 6), "whole numbers"),
+                                         (np.zeros((8, 8)), "truth shape")])
+def test_bad_truth_labels(tmp_path, capsys, truth, word):
+    np.save(tmp_path / "in.npy", _disc(16))
+    np.save(tmp_path / "t.npy", truth)
+    assert_refused(tmp_path, capsys, [tmp_path / "in.npy", "-o", tmp_path / "m.vtp", "--truth",
+                                      tmp_path / "t.npy"], "t.npy", word)
+
+
 def test_malformed_dask_address(tmp_path, capsys):
     arr = _disc(16)
     np.save(tmp_path / "vol.npy", np.stack([arr, arr]))
