@@ -34,7 +34,25 @@ def as_image(image, name="image", min_size=2):
         raise InputError(
             f"{name}: {int(bad.sum())} pixel(s) are NaN or infinite (first at row {r}, col {c})"
         )
+    _check_span(arr, name)
     return arr
+
+
+SPAN_LIMITS = (1e-200, 1e200)
+"""Gray values whose span (when not 0) or magnitude fall outside these are refused: the
+stages' gradients, squares and scalings would underflow or overflow float64 (no scanner
+writes such values)."""
+
+
+def _check_span(arr, name):
+    if arr.dtype.kind != "f" or arr.size == 0:
+        return
+    lo, hi = float(arr.min()), float(arr.max())
+    span = hi - lo
+    if (span and not SPAN_LIMITS[0] <= span <= SPAN_LIMITS[1]) or max(-lo, hi) > SPAN_LIMITS[1]:
+        raise InputError(f"{name}: values {lo:g}..{hi:g} are out of the range ctseg can compute "
+                         f"with (span and size within {SPAN_LIMITS[0]:g}..{SPAN_LIMITS[1]:g}); "
+                         "rescale the data")
 
 
 def check_number(value, name, low=None, high=None, low_open=False, high_open=False,
@@ -79,6 +97,7 @@ def as_volume(volume, name="volume", min_side=1):
             k, r, c = np.argwhere(bad)[0]
             raise InputError(f"{name}: {int(bad.sum())} voxel(s) are NaN or infinite (first in "
                              f"slice {k}, row {r}, col {c})")
+        _check_span(vol, name)
     return vol
 
 

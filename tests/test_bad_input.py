@@ -93,6 +93,9 @@ def assert_refused(tmp_path, capsys, args, *words):
     ("complex", np.ones((8, 8), complex), ["complex"]),
     ("strings", np.array([["a", "b"], ["c", "d"]]), ["numeric"]),
     ("rgb_npy", np.zeros((40, 50, 3)), ["colour", "gray"]),
+    ("subnormal", _disc(16) * 1e-310, ["out of the range", "rescale"]),
+    ("huge", _disc(16) * 1e300, ["out of the range", "rescale"]),
+    ("subnormal_volume", np.stack([_disc(16)] * 3) * 1e-310, ["out of the range", "rescale"]),
 ])
 def test_refused_arrays(tmp_path, capsys, name, array, words):
     np.save(tmp_path / "in.npy", array)
