@@ -165,8 +165,14 @@ def _read_folder(path, series=None):
     if dicoms:
         return _dicom_series(path, dicoms, series)
     if tiffs:
+        _no_series(path, series)
         return _read_tiff_folder(path, tiffs)
     raise InputError(f"{path}: a folder with no DICOM or TIFF slices in it")
+
+
+def _no_series(path, series):
+    if series is not None:
+        raise InputError(f"{path}: series {series} asked for, but only DICOM data have series")
 
 
 def read_image(path, series=None):
@@ -210,6 +216,8 @@ def _read_any(path, series):
     if os.path.isdir(path):
         return _read_folder(path, series)
     ext = _ext(path)
+    if not (ext == ".dcm" or _is_dicom(path)):
+        _no_series(path, series)
     if ext == ".npy":
         try:
             arr = np.load(path, allow_pickle=False)

@@ -245,6 +245,12 @@ def test_bad_truth_labels(tmp_path, capsys, truth, word):
                                       tmp_path / "t.npy"], "t.npy", word)
 
 
+def test_series_of_a_file_that_has_none(tmp_path, capsys):
+    np.save(tmp_path / "in.npy", _disc(16))
+    assert_refused(tmp_path, capsys, [tmp_path / "in.npy", "-o", tmp_path / "m.vtp", "--series", "1.2.3"],
+                   "only DICOM data have series")
+
+
 def test_malformed_dask_address(tmp_path, capsys):
     arr = _disc(16)
     np.save(tmp_path / "vol.npy", np.stack([arr, arr]))
