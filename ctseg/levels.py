@@ -1,7 +1,7 @@
 """Material gray levels (SPEC 7's data-driven defaults): the modes of the gray histogram
 of the pixels away from edges, on the 0-255 scale, for one slice or a stack of slices."""
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, uniform_filter
+from scipy.ndimage import gaussian_filter1d, maximum_filter, minimum_filter, uniform_filter
 
 from ._reduce import weighted_variance
 from ._validate import as_image
@@ -144,7 +144,10 @@ def pixel_material_levels(image255, flat, merge_k=DEFAULTS.merge_k,
                           merge_threshold_255=DEFAULTS.merge_threshold_255,
                           level_min_fraction=DEFAULTS.level_min_fraction,
                           n_materials=DEFAULTS.n_materials):
-    """Material gray levels from the pixels away from edges (SPEC 7's data-driven defaults).
+    """Material gray levels from the pixels away from edges (SPEC 7's data-driven defaults):
+    the modes of their 3 x 3-smoothed grays (:func:`material_modes`); with ``n_materials``
+    'auto', only modes holding a core, a flat pixel whose 3 x 3 neighbours all lie in its
+    mode (:func:`_has_core`).
 
     Parameters
     ----------
@@ -196,10 +199,23 @@ def pixel_material_levels(image255, flat, merge_k=DEFAULTS.merge_k,
         separation = lambda g: base + merge_rel * g  # noqa: E731
     else:
         separation = lambda g: merge_threshold_255  # noqa: E731
-    levels, _ = material_modes(v, w, max(sigma, 0.5),
-                               0.0 if n_modes else level_min_fraction * len(v), separation,
-                               n_modes=n_modes)
+    levels, edges = material_modes(v, w, max(sigma, 0.5),
+                                   0.0 if n_modes else level_min_fraction * len(v), separation,
+                                   n_modes=n_modes)
+    if n_modes is None and len(levels) > 1:
+        levels = levels[_has_core(img, flat, edges)]
     return levels, sigma
+
+
+def _has_core(img, flat, edges):
+    """Which modes hold a core: a flat pixel whose 3 x 3 neighbours (in its slice) all lie in
+    its mode. The 3 x 3 mean of pixels along a sharp edge between two materials falls a third
+    and two thirds of the way between them, and on a low-noise image those bands make modes
+    of their own; they are one or two pixels wide, a material is not."""
+    basin = np.searchsorted(edges, img)
+    size = (1,) * (img.ndim - 2) + (3, 3)
+    core = flat & (minimum_filter(basin, size, mode="nearest") == maximum_filter(basin, size, mode="nearest"))
+    return np.bincount(basin[core], minlength=len(edges) + 1) > 0
 
 
 def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,

@@ -178,3 +178,28 @@ def test_claim_missing_levels_never_empties_a_level():
         assert np.all(after[before])  # held levels stay held
         assert after.sum() == min(k, m)  # and every missing one is held where elements allow
         assert np.all(out[out != material] < k) and np.all(~before[out[out != material]])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_sharp_low_noise_edges_make_no_levels_of_their_own(seed):
+    """A small, sharp, low-noise image of three materials (a disc of high contrast, a bar of
+    half that): the 3 x 3 means along the bar's edges fall a third and two thirds of the way
+    between air and the bar, and its edges count as flat beside the disc's stronger ones.
+    Those bands have no core, so they are no levels: exactly the three of the image."""
+    import ctseg
+    from ctseg.density import flat_pixels
+    from ctseg.intensity import rescale_gray
+    from ctseg.levels import pixel_material_levels
+
+    rng = np.random.default_rng(seed)
+    img = np.full((32, 32), 50.0)
+    yy, xx = np.mgrid[:32, :32]
+    img[(yy - 19.2) ** 2 + (xx - 16) ** 2 < 64] = 200.0
+    img[4:12, 4:28] = 120.0
+    img += rng.normal(0, 3, img.shape)
+    g255, (offset, factor) = rescale_gray(img)
+    levels, _ = pixel_material_levels(g255, flat_pixels(g255))
+    true255 = np.clip((np.array([50.0, 120.0, 200.0]) - offset) * factor, 0.0, 255.0)
+    assert len(levels) == 3 and np.allclose(levels, true255, atol=6.0), (levels, true255)
+    seg = ctseg.segment_image(img, seed=0)
+    assert np.allclose(seg.material_gray, [50, 120, 200], atol=6.0), seg.material_gray
