@@ -101,6 +101,26 @@ def as_volume(volume, name="volume", min_side=1):
     return vol
 
 
+MAX_LABEL = 255
+"""The largest truth label :func:`as_labels` takes: labels number materials, few of them."""
+
+
+def as_labels(labels, name="labels"):
+    """``labels`` as int64 material numbers (0, 1, ... by ascending gray), or InputError:
+    whole numbers from 0 to :data:`MAX_LABEL`, nothing else."""
+    arr = np.asarray(labels)
+    if arr.dtype.kind not in "biuf":
+        raise InputError(f"{name}: labels must be numbers, got {arr.dtype}")
+    if arr.size and not (np.all(np.isfinite(arr)) and np.all(arr == np.round(arr))
+                         and arr.min() >= 0 and arr.max() <= MAX_LABEL):
+        finite = arr[np.isfinite(arr)]
+        seen = f"{finite.min():g}..{finite.max():g}" if finite.size else "none finite"
+        raise InputError(f"{name}: labels must be whole numbers 0..{MAX_LABEL} (material 0, 1, "
+                         f"... by ascending gray); got values {seen}"
+                         + (", NaN or infinite ones" if finite.size < arr.size else ""))
+    return arr.astype(np.int64)
+
+
 def check_spacing(spacing):
     """``spacing`` as a float64 array (sx, sy, sz): three finite numbers > 0, or
     ParameterError."""

@@ -2,12 +2,32 @@
 failed run resumes where it stopped, and never mixes slices of two runs."""
 import json
 import os
+import shutil
 
 import numpy as np
 
 from .errors import InputError, ResumeError
 from .params import RUN_ONLY
 from .pipeline import SegmentedMesh
+
+
+def checkpoint_folder(output):
+    """Where a volume run keeps its finished slices until its outputs are written."""
+    return os.fspath(output) + ".ctseg-partial"
+
+
+def resume_hint(folder):
+    """What a failed or interrupted run tells the user of its checkpoint ``folder``: how
+    many finished slices it keeps for ``--resume``. A folder with none is removed (the run
+    stopped before a slice was done: nothing to resume, nothing left behind)."""
+    if not folder or not os.path.isdir(folder):
+        return ""
+    n = sum(1 for f in os.listdir(folder) if f.startswith("slice_") and f.endswith(".npz"))
+    if not n:
+        shutil.rmtree(folder, ignore_errors=True)
+        return ""
+    return (f"; {n} finished slice(s) are kept in {folder}: run the same command with "
+            "--resume to go on from there")
 
 
 class Checkpoint:

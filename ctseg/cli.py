@@ -8,6 +8,8 @@ import time
 
 import numpy as np
 
+from ._validate import as_labels
+from .checkpoint import checkpoint_folder, resume_hint
 from .errors import CTSegError, InputError, ParameterError, ResumeError
 from .params import SPECS, SegmentParams, resolve_name
 
@@ -205,9 +207,6 @@ def _json_value(value):
     return value.tolist() if hasattr(value, "tolist") else str(value)
 
 
-MAX_TRUTH_LABEL = 255
-
-
 def _read_truth(path, shape):
     """The truth labels (int64) for --truth, checked against the image's shape first."""
     if not path:
@@ -218,33 +217,7 @@ def _read_truth(path, shape):
     truth = np.asarray(truth)
     if truth.shape != tuple(shape):
         raise InputError(f"{path}: truth shape {truth.shape} differs from the image's {tuple(shape)}")
-    if truth.dtype.kind not in "biuf":
-        raise InputError(f"{path}: truth labels must be numbers, got {truth.dtype}")
-    # labels number materials by ascending gray (0, 1, ...): whole numbers, few of them
-    if not (np.all(np.isfinite(truth)) and np.all(truth == np.round(truth))
-            and truth.min() >= 0 and truth.max() <= MAX_TRUTH_LABEL):
-        finite = truth[np.isfinite(truth)]
-        seen = f"{finite.min():g}..{finite.max():g}" if finite.size else "none finite"
-        raise InputError(f"{path}: truth labels must be whole numbers 0..{MAX_TRUTH_LABEL} "
-                         f"(material 0, 1, ... by ascending gray); got values {seen}"
-                         + (", NaN or infinite ones" if finite.size < truth.size else ""))
-    return truth.astype(np.int64)
-
-
-def checkpoint_folder(output):
-    """Where a volume run keeps its finished slices until its outputs are written."""
-    return os.fspath(output) + ".ctseg-partial"
-
-
-def _resume_hint(args):
-    folder = getattr(args, "checkpoint", None)
-    if not folder or not os.path.isdir(folder):
-        return ""
-    n = sum(1 for f in os.listdir(folder) if f.startswith("slice_") and f.endswith(".npz"))
-    if not n:  # stopped before a slice was done: nothing to resume, nothing left behind
-        shutil.rmtree(folder, ignore_errors=True)
-    return (f"; {n} finished slice(s) are kept in {folder}: run the same command with "
-            "--resume to go on from there") if n else ""
+    return as_labels(truth, path)
 
 
 def _checked_input(image, path):
@@ -397,6 +370,7 @@ def build_parser():
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.checkpoint = None  # a volume run's, once it has one
     try:
         if args.command == "params":
             return _print_params(args)
@@ -406,12 +380,12 @@ def main(argv=None):
     except CTSegError as exc:
         if args.debug:
             raise
-        hint = "" if isinstance(exc, ResumeError) else _resume_hint(args)
+        hint = "" if isinstance(exc, ResumeError) else resume_hint(args.checkpoint)
         print(f"ctseg: error: {exc}{hint}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         note = f" ({args.mode_note})" if getattr(args, "mode_note", "") else ""
-        print(f"ctseg: interrupted; no partial output was left{_resume_hint(args)}{note}",
+        print(f"ctseg: interrupted; no partial output was left{resume_hint(args.checkpoint)}{note}",
               file=sys.stderr)
         return 130
     return 1
