@@ -40,7 +40,7 @@ GEOMETRIES = {
 
 @pytest.fixture(scope="module")
 def volume():
-    vol = make_volume(8, 32, seed=3).image[:, 1:31, :]  # four materials, steel among them
+    vol = make_volume(8, 32, seed=3).image[:, 1:31, :]  # air, aluminium, a thin polymer ring, steel
     assert len(set(vol.shape)) == 3  # every axis its own length: no axis mix-up hides
     return vol
 
@@ -164,7 +164,9 @@ def test_stage_chain_equals_the_composite_3d(tmp_path, volume, name):
     assert _field(out, "relabelled_for_manifold")[0] == \
         comp.result.diagnostics["relabelled_for_manifold"]
     assert _field(out, "subpixel_moved")[0] == comp.result.diagnostics["subpixel_moved"] > 0
-    assert len(np.unique(arrays["material"])) == 4
+    # air, aluminium and steel: the 2-voxel polymer ring is too thin for a level of its own
+    # at this size (a fourth level here was a partial-volume mode, before levels needed a core)
+    assert len(np.unique(arrays["material"])) == 3
     assert comp.result.diagnostics["relabelled_for_manifold"] > 0  # the repair ran
     assert comp.result.diagnostics["blur_px"] is not None  # and the blur correction
 
