@@ -46,12 +46,20 @@ def image_to_array(image):
     """vtkImageData (one scalar component) -> (array, ImageGeometry).
 
     A 2D image (z dimension 1) gives an array of shape (rows=ny, cols=nx), row j = VTK j;
-    a volume gives (nz, ny, nx). Multi-component scalars are refused here.
+    a volume gives (nz, ny, nx). Array index 0 is the extent's first point (a cropped image,
+    as vtkExtractVOI gives, starts elsewhere): the geometry's origin is that point's.
+    Multi-component scalars are refused here.
     """
     dims = image.GetDimensions()
-    scalars = image.GetPointData().GetScalars()
+    pd = image.GetPointData()
+    scalars = pd.GetScalars()
     if scalars is None:
-        raise InputError("image: the vtkImageData has no point scalars")
+        names = [pd.GetArrayName(i) for i in range(pd.GetNumberOfArrays())]
+        raise InputError("image: the vtkImageData has no active point scalars"
+                         + (f" (its point arrays: {', '.join(map(str, names))}; make one active)"
+                            if names else
+                            " (cell data? convert with vtkCellDataToPointData)"
+                            if image.GetCellData().GetNumberOfArrays() else ""))
     if scalars.GetNumberOfComponents() != 1:
         raise InputError(
             f"image: {scalars.GetNumberOfComponents()} components per pixel; ctseg needs one "
@@ -63,7 +71,10 @@ def image_to_array(image):
     if hasattr(image, "GetDirectionMatrix"):
         m = image.GetDirectionMatrix()
         direction = np.array([[m.GetElement(r, c) for c in range(3)] for r in range(3)])
-    return arr.copy(), ImageGeometry(image.GetOrigin(), image.GetSpacing(), direction)
+    spacing = np.array(image.GetSpacing(), float)
+    first = np.array(image.GetExtent()[::2], float)  # VTK's index of array index 0
+    origin = np.array(image.GetOrigin(), float) + direction @ (first * spacing)
+    return arr.copy(), ImageGeometry(origin, spacing, direction)
 
 
 def array_to_image(array, geometry=None, name="scalars", components=1):
