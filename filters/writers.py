@@ -245,7 +245,7 @@ def _write(poly, path, ext, points, triangles, arrays):
     if ext == ".stl":
         pattern = mesh_outputs(path)[0]
         mats = np.unique(material)
-        outs = [pattern.format(material=k) for k in mats]
+        outs = [pattern.replace("{material}", str(k)) for k in mats]
         with atomic_outputs(outs) as temps:
             for k, tmp in zip(mats, temps):
                 _write_stl(points, triangles[material == k], tmp)
@@ -253,7 +253,7 @@ def _write(poly, path, ext, points, triangles, arrays):
     if ext == ".mlp":
         project, pattern = mesh_outputs(path)
         mats = np.unique(material)
-        plys = [pattern.format(material=k) for k in mats]
+        plys = [pattern.replace("{material}", str(k)) for k in mats]
         with atomic_outputs([project] + plys) as temps:
             for k, tmp in zip(mats, temps[1:]):
                 pts, tri = _submesh(points, triangles[material == k])

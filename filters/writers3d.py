@@ -146,7 +146,7 @@ def write_tetra_mesh(result, path, geometry=None, check=True):
         return [path], checks
     if ext == ".stl":
         mats = np.unique(material)
-        outs = [tetra_outputs(path)[0].format(material=k) for k in mats]
+        outs = [tetra_outputs(path)[0].replace("{material}", str(k)) for k in mats]
         with atomic_outputs(outs) as temps:
             for k, tmp in zip(mats, temps):
                 _write_stl(points, triangles[material == k], tmp)

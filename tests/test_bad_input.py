@@ -292,6 +292,17 @@ def test_one_file_for_two_outputs(tmp_path, capsys):
                                       tmp_path / "m.vtp"], "--boundary", "the same file as -o")
 
 
+@pytest.mark.parametrize("name", ["p{v2}.stl", "p{0}.mlp", "a}b.stl"])
+def test_braces_in_a_pattern_output_name(tmp_path, capsys, name):
+    """STL and MLP outputs write one file per material named after the output: braces in
+    that name are plain characters."""
+    np.save(tmp_path / "in.npy", _disc(24))
+    rc, err = run(tmp_path, capsys, [tmp_path / "in.npy", "-o", tmp_path / name, "-q"])
+    assert rc == 0, err
+    stem = name[:-4]
+    assert (tmp_path / f"{stem}_material1.{'stl' if name.endswith('stl') else 'ply'}").exists()
+
+
 @pytest.mark.parametrize("output,blocker", [("y.obj", "y.mtl"), ("z.stl", "z_material1.stl")])
 def test_side_file_blocked_by_a_folder(tmp_path, capsys, output, blocker):
     """A file written beside the output (OBJ's .mtl, STL's one file per material) that
