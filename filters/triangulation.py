@@ -35,6 +35,17 @@ def _site_points(sites):
     return np.array(numpy_support.vtk_to_numpy(sites.GetPoints().GetData()), np.float64)
 
 
+def _on_the_border(index_xy, shape):
+    """Sites mapped back from world to index coordinates, those within 1e-6 px of the
+    image's border lines put back on them: a rotated, anisotropic geometry leaves them
+    1e-15 off, and border sites no longer exactly in line give Qhull a sliver."""
+    xy = np.array(index_xy, float)
+    for axis, last in ((0, shape[1] - 1), (1, shape[0] - 1)):
+        for line in (0.0, float(last)):
+            xy[np.abs(xy[:, axis] - line) < 1e-6, axis] = line
+    return xy
+
+
 class DelaunayMeshFilter(CTSegAlgorithm):
     """Delaunay triangulation of a slice's CVT sites (:func:`ctseg.delaunay_mesh`, SPEC 4).
 
@@ -55,7 +66,7 @@ class DelaunayMeshFilter(CTSegAlgorithm):
             raise InputError(f"sites: of a volume {shape}; DelaunayTetraFilter makes their "
                              "tetrahedra (DelaunayMeshFilter triangulates a slice's sites)")
         pts = _site_points(sites)
-        mesh = delaunay_mesh(geom.to_index(pts)[:, :2])
+        mesh = delaunay_mesh(_on_the_border(geom.to_index(pts)[:, :2], shape))
         out = self._output_poly(out_info)
         out.SetPoints(_points(geom.to_world(np.column_stack([mesh.points, np.zeros(len(pts))]))))
         out.SetPolys(_cells(mesh.triangles.ravel(), 3))
