@@ -106,14 +106,14 @@ class CTSegAlgorithm(VTKPythonAlgorithmBase):
         ParameterError naming the closest one (or the closest spec name)."""
         close = difflib.get_close_matches(str(key), self.PARAMETERS, n=1, cutoff=0.5)
         mine = f"(the parameters of {type(self).__name__}: {', '.join(self.PARAMETERS) or 'none'})"
+        hint = f"; did you mean {close[0]!r}?" if close else ""
         try:
             names = [n for n in resolve_name(key) if n in self.PARAMETERS]
         except ParameterError as exc:
             if not close:
                 raise ParameterError(f"{exc} {mine}") from None
-            names = []
+            raise ParameterError(f"{key}: not a ctseg parameter{hint} {mine}") from None
         if not names:
-            hint = f"; did you mean {close[0]!r}?" if close else ""
             raise ParameterError(f"{key}: not a parameter of {type(self).__name__} (another "
                                  f"stage's){hint} {mine}")
         return names

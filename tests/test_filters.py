@@ -201,6 +201,8 @@ def test_numbers_from_vtk_and_python_values():
         d.SetParameter("lam", 50.0)  # another stage's
     with pytest.raises(CTSegError, match="did you mean 'density_floor'"):
         d.SetParameter("floor", 0.05)
+    with pytest.raises(CTSegError, match="lambda: not a ctseg parameter; did you mean 'lam'"):
+        CTSegmentFilter().SetParameter("lambda", 3.0)  # no parameter at all, not another stage's
     assert not hasattr(d, "SetFloor") and not hasattr(d, "SetSaturation")
 
 
