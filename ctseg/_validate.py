@@ -34,17 +34,19 @@ def as_image(image, name="image", min_size=2):
         raise InputError(
             f"{name}: {int(bad.sum())} pixel(s) are NaN or infinite (first at row {r}, col {c})"
         )
-    _check_span(arr, name)
     return arr
 
 
-SPAN_LIMITS = (1e-200, 1e200)
-"""Gray values whose span (when not 0) or magnitude fall outside these are refused: the
-stages' gradients, squares and scalings would underflow or overflow float64 (no scanner
-writes such values)."""
+SPAN_LIMITS = (1e-150, 1e150)
+"""Gray values whose span (when not 0) or magnitude fall outside these are refused: their
+squares (variances, fits) and sums over a large image must stay finite and nonzero in
+float64 (no scanner writes such values)."""
 
 
-def _check_span(arr, name):
+def check_value_range(arr, name):
+    """InputError unless a float image's values lie within :data:`SPAN_LIMITS` (checked once,
+    at the public entries: a slice or a stage's array may span less than the whole)."""
+    arr = np.asarray(arr)
     if arr.dtype.kind != "f" or arr.size == 0:
         return
     lo, hi = float(arr.min()), float(arr.max())
@@ -97,7 +99,6 @@ def as_volume(volume, name="volume", min_side=1):
             k, r, c = np.argwhere(bad)[0]
             raise InputError(f"{name}: {int(bad.sum())} voxel(s) are NaN or infinite (first in "
                              f"slice {k}, row {r}, col {c})")
-        _check_span(vol, name)
     return vol
 
 

@@ -222,8 +222,7 @@ def _read_truth(path, shape):
 
 def _checked_input(image, path):
     """The input as a slice or a volume, or an InputError naming the file."""
-    from ._validate import as_image
-    from ._validate import as_volume
+    from ._validate import as_image, as_volume, check_value_range
 
     if image.ndim == 3 and image.shape[0] == 1:
         image = image[0]
@@ -237,6 +236,7 @@ def _checked_input(image, path):
         as_volume(image, name=path)
     else:
         raise InputError(f"{path}: shape {image.shape} is neither a slice nor a volume")
+    check_value_range(image, path)
     return image
 
 

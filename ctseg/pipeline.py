@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._allocation import release_free_heap
-from ._validate import as_image
+from ._validate import as_image, check_value_range
 from .beam_hardening import correct_streaks
 from .boundary import chain_polylines, material_boundary
 from .cvt import lloyd_cvt
@@ -196,6 +196,7 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
     """
     p = resolve(params, **overrides)
     img = as_image(image)
+    check_value_range(img, "image")
     if levels_255 is None:  # a volume's slice: checked against the whole volume
         check_gray_levels(p.gray_levels, img)
     n_sites = p.n_sites

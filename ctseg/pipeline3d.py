@@ -9,7 +9,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ._allocation import bulk_allocations
-from ._validate import as_volume, check_spacing
+from ._validate import as_volume, check_spacing, check_value_range
 from .beam_hardening import correct_streaks_volume
 from .errors import InputError
 from .levels import volume_levels
@@ -177,6 +177,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     """
     p = resolve(params, **overrides)
     vol = as_volume(volume)
+    check_value_range(vol, "volume")
     check_shape_3d(vol.shape)
     sp = check_spacing((1.0, 1.0, 1.0) if spacing is None else spacing)
     report = monotone_progress(progress)

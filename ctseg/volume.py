@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._validate import as_volume
+from ._validate import as_volume, check_value_range
 from .errors import CTSegError, InputError, ParameterError
 from .geometry import slice_axis, volume_slice
 from .levels import LEVEL_SAMPLE_VOXELS, volume_levels
@@ -201,6 +201,7 @@ def segment_volume(volume, params=None, *, spacing=None, client=None, progress=N
                      "crop or downsample it, or use slices mode")
         return segment_volume_3d(volume, p, spacing=spacing, progress=progress)
     vol = as_volume(volume)
+    check_value_range(vol, "volume")
     ax = slice_axis(p.axis)
     n_jobs = (os.cpu_count() or 1) if p.n_jobs == AUTO else p.n_jobs
     n_slices = vol.shape[ax]
