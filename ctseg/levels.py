@@ -147,7 +147,8 @@ def pixel_material_levels(image255, flat, merge_k=DEFAULTS.merge_k,
     """Material gray levels from the pixels away from edges (SPEC 7's data-driven defaults):
     the modes of their 3 x 3-smoothed grays (:func:`material_modes`); with ``n_materials``
     'auto', only modes holding a core, a flat pixel whose 3 x 3 neighbours all lie in its
-    mode (:func:`_has_core`).
+    mode (:func:`_has_core`; not on slices under 5 pixels a side, nor where no mode has
+    one).
 
     Parameters
     ----------
@@ -202,8 +203,9 @@ def pixel_material_levels(image255, flat, merge_k=DEFAULTS.merge_k,
     levels, edges = material_modes(v, w, max(sigma, 0.5),
                                    0.0 if n_modes else level_min_fraction * len(v), separation,
                                    n_modes=n_modes)
-    if n_modes is None and len(levels) > 1:
-        levels = levels[_has_core(img, flat, edges)]
+    if n_modes is None and len(levels) > 1 and min(img.shape[-2:]) >= 5:
+        core = _has_core(img, flat, edges)
+        levels = levels[core] if core.any() else levels  # none: too small to tell
     return levels, sigma
 
 
