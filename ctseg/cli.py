@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from ._validate import as_labels
+from ._validate import as_image, as_labels, as_volume, check_value_range
 from .checkpoint import checkpoint_folder, resume_hint
 from .errors import CTSegError, InputError, ParameterError, ResumeError
 from .params import SPECS, SegmentParams, resolve_name
@@ -187,7 +187,7 @@ def _finish(args, image, diag, written):
         with atomic_outputs([args.report]) as (tmp,):
             with open(tmp, "w") as fh:
                 json.dump(diag, fh, indent=2, default=_json_value)
-    if getattr(args, "checkpoint", None):
+    if args.checkpoint:
         shutil.rmtree(args.checkpoint, ignore_errors=True)  # everything is written
     if not args.quiet:
         if diag.get("mode_note"):  # after the work: a refusal stays one line
@@ -222,8 +222,6 @@ def _read_truth(path, shape):
 
 def _checked_input(image, path):
     """The input as a slice or a volume, or an InputError naming the file."""
-    from ._validate import as_image, as_volume, check_value_range
-
     if image.ndim == 3 and image.shape[0] == 1:
         image = image[0]
     if image.ndim == 3 and image.shape[2] in (3, 4) and min(image.shape[:2]) > 4:

@@ -196,8 +196,8 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
     """
     p = resolve(params, **overrides)
     img = as_image(image)
-    check_value_range(img, "image")
     if levels_255 is None:  # a volume's slice: checked against the whole volume
+        check_value_range(img, "image")
         check_gray_levels(p.gray_levels, img)
     n_sites = p.n_sites
     if n_sites == AUTO:  # the size rule's count; the boundary rule may raise it below

@@ -216,7 +216,7 @@ def _read_any(path, series):
     if os.path.isdir(path):
         return _read_folder(path, series)
     ext = _ext(path)
-    if not (ext == ".dcm" or _is_dicom(path)):
+    if series is not None and not (ext == ".dcm" or _is_dicom(path)):
         _no_series(path, series)
     if ext == ".npy":
         try:
