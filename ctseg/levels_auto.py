@@ -3,7 +3,7 @@ measure (granular and porous media, all partial volume; quantized or windowed da
 clipped data, with the multi-level Otsu they share and the report of how the levels were
 found."""
 import numpy as np
-from scipy.ndimage import binary_erosion, gaussian_filter, label, uniform_filter
+from scipy.ndimage import binary_erosion, gaussian_filter, label, minimum_filter, uniform_filter
 
 from .errors import ParameterError
 from .params import DEFAULTS
@@ -156,7 +156,16 @@ def tail_levels(g255, levels, separation, mask=None, below=True):
         size = np.bincount(regions.ravel(), minlength=n_regions + 1)
         size[0] = 0
         tail = size[regions] >= TAIL_MIN_REGION_PX
-        if n and tail.sum() >= TAIL_MIN_FRACTION * n:
+        if pct > 50.0 and n and 0 < tail.sum() < TAIL_MIN_FRACTION * n:
+            # fewer: a dense insert if a whole 3 x 3 square of its pixels lies beyond
+            core = minimum_filter(g.reshape(sm.shape), size=(1, 3, 3)) > hi + separation(hi)
+            dense = np.zeros(n_regions + 1, bool)
+            dense[regions[core & tail]] = True
+            dense[0] = False
+            tail = dense[regions]
+            if tail.any():
+                added.append(float(np.percentile(sm[tail], pct)))
+        elif n and tail.sum() >= TAIL_MIN_FRACTION * n:
             added.append(float(np.percentile(sm[tail], pct)))
     return added
 
