@@ -196,7 +196,7 @@ def _finish(args, image, diag, written):
             from ctseg.filters.job3d import summary_lines_3d
 
             outs = written + [p for p in (args.surfaces, args.report, args.figure) if p]
-            print("\n".join(summary_lines_3d(args.input, diag, outs)))
+            print("\n".join(summary_lines_3d(args.input, diag, outs) + _stale_notes(outs)))
         else:
             _summary(args, image, diag, written)
     return 0
@@ -238,6 +238,11 @@ def _checked_input(image, path):
     return image
 
 
+def _stale_notes(outs):
+    from ctseg.filters.writers import stale_siblings
+    return [f"note: {p} is from an earlier run, not this one" for p in stale_siblings(outs)]
+
+
 def _summary(args, image, diag, written):
     shape = " x ".join(str(n) for n in image.shape[::-1])
     print(f"{args.input}: {shape} -> {diag['n_triangles']} triangles, "
@@ -253,6 +258,7 @@ def _summary(args, image, diag, written):
               + ", ".join(f"{k} {v:.2f} s" for k, v in diag["slice_times_s"].items()))
     outs = written + [p for p in (args.boundary, args.report, args.figure) if p]
     print(f"mesh checks: {'passed' if diag['mesh_checks']['ok'] else 'FAILED'}; wrote {', '.join(outs)}")
+    print("".join(f"{note}\n" for note in _stale_notes(outs)), end="")
     if "accuracy" in diag:
         acc = diag["accuracy"]
         print("Dice per material: " + ", ".join(f"{d:.4f}" for d in acc["dice"])

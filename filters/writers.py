@@ -267,6 +267,25 @@ def _write(poly, path, ext, points, triangles, arrays):
     return [obj, mtl]
 
 
+def stale_siblings(written):
+    """Files beside the per-material files just written (``NAME_material<k>.stl`` or
+    ``.ply``) that follow the same pattern but were not written now: left by an earlier run
+    with more materials. They are not removed (they are the user's files); the CLI names
+    them so that nobody takes them for part of this result."""
+    import glob
+    import re
+
+    stale = []
+    for path in written:
+        m = re.fullmatch(r"(.*)_material\d+(\.(?:stl|ply))", os.fspath(path), re.IGNORECASE)
+        if m:
+            pattern = glob.escape(m.group(1)) + "_material*" + glob.escape(m.group(2))
+            stale += [p for p in glob.glob(pattern)
+                      if re.fullmatch(re.escape(m.group(1)) + r"_material\d+" + re.escape(m.group(2)),
+                                      p, re.IGNORECASE) and p not in written]
+    return sorted(set(stale))
+
+
 def write_polydata(poly, path):
     """Write any vtkPolyData (e.g. boundary polylines) as VTK XML (.vtp), through a
     temporary name renamed at the end. No mesh checks: use :func:`write_mesh` for meshes."""

@@ -238,3 +238,20 @@ def test_real_sigint_to_the_command(tmp_path):
     assert len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "m.vtp").exists()
     assert not [f for f in os.listdir(tmp_path) if f.startswith(".ctseg-")]
+
+
+def test_per_material_files_left_by_an_earlier_run_are_named(slice_files, capsys):
+    """A run writing m_material0.stl and m_material1.stl into a folder that still holds an
+    earlier run's m_material2.stl (and a m_material_notes.stl that is not ours) names the
+    stale one in its summary, and leaves every file where it was."""
+    d = slice_files
+    (d / "m_material2.stl").write_text("old")
+    (d / "m_material_notes.stl").write_text("mine")
+    assert main(["mesh", str(d / "slice.npy"), "-o", str(d / "m.stl"), "--sites", "150"]) == 0
+    out = capsys.readouterr().out
+    assert (d / "m_material0.stl").exists() and (d / "m_material1.stl").exists()
+    notes = [line for line in out.splitlines() if line.startswith("note:")]
+    assert notes == [f"note: {d / 'm_material2.stl'} is from an earlier run, not this one"]
+    assert (d / "m_material2.stl").read_text() == "old"
+    assert main(["mesh", str(d / "slice.npy"), "-o", str(d / "n.stl"), "--sites", "150"]) == 0
+    assert "note:" not in capsys.readouterr().out
