@@ -258,9 +258,9 @@ def material_levels(images, scale, *, gray_levels=DEFAULTS.gray_levels,
       every k' <= k keeps adjacent class means at least that separation apart (sigma
       from the flat pixels), used if it is more levels than the flat pixels gave.
     * A material beyond the outermost levels (n_materials 'auto';
-      :func:`ctseg.levels_auto.tail_levels`): regions of pixels further than the
-      separation above the highest level (a dense insert too small for a mode of its own
-      flat pixels), or, where the flat pixels are untrusted, below the lowest (a phase too
+      :func:`ctseg.levels_auto.tail_levels`): regions further than the separation above
+      the highest level (a dense insert too small for flat pixels: one 3 x 3 square beyond
+      suffices), or, where the flat pixels are untrusted, below the lowest (a phase too
       fine to leave a low-gradient pixel), get a level there. Below the lowest level only
       then: with trusted flat pixels, the dark bands that beam hardening and scatter leave
       between metal parts lie there.

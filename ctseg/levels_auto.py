@@ -115,7 +115,9 @@ end (its pure pixels sit at the far end, partial-volume ones towards the known l
 def tail_levels(g255, levels, separation, mask=None, below=True):
     """Levels of materials beyond the outermost ones found (:data:`TAIL_MIN_FRACTION`,
     :data:`TAIL_MIN_REGION_PX`), on the grays smoothed over 3 x 3 within each slice, as the
-    levels are measured.
+    levels are measured. Above the highest level fewer pixels than the fraction suffice
+    when their regions hold a whole 3 x 3 square of pixels beyond the separation (a small
+    dense insert; hot pixels hold none): the level is then those regions'.
 
     Parameters
     ----------
