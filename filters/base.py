@@ -169,12 +169,20 @@ class CTSegAlgorithm(VTKPythonAlgorithmBase):
     def _input(in_info, port=0):
         return vtkDataObject.GetData(in_info[port], 0)
 
+    def gray_array_name(self):
+        """The point array read as the gray values: the one chosen with VTK's
+        ``SetInputArrayToProcess(0, port, 0, vtkDataObject.FIELD_ASSOCIATION_POINTS, name)``
+        (ParaView's "Gray values" property), or None for the active scalars."""
+        info = self.GetInputArrayInformation(0)
+        key = vtkDataObject.FIELD_NAME()
+        return info.Get(key) if info is not None and info.Has(key) else None
+
     def _input_slice(self, in_info, port=0):
         """The image on ``port`` as a (rows, cols) array and its geometry; volumes refused."""
         image = vtkImageData.GetData(in_info[port], 0)
         if image is None:
             raise InputError(f"input {port}: expected a vtkImageData")
-        arr, geom = image_to_array(image)
+        arr, geom = image_to_array(image, self.gray_array_name())
         if arr.ndim != 2:
             raise InputError(f"image: {arr.shape[0]} slices; {type(self).__name__} takes one "
                              "slice (CTSegmentFilter segments volumes, in 3D or slice by slice; "

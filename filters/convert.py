@@ -42,17 +42,23 @@ def geometry_from_field_data(data):
     return ImageGeometry(v[0:3], v[3:6], v[6:15].reshape(3, 3)), (int(v[15]), int(v[16]))
 
 
-def image_to_array(image):
+def image_to_array(image, array_name=None):
     """vtkImageData (one scalar component) -> (array, ImageGeometry).
 
     A 2D image (z dimension 1) gives an array of shape (rows=ny, cols=nx), row j = VTK j;
     a volume gives (nz, ny, nx). Array index 0 is the extent's first point (a cropped image,
     as vtkExtractVOI gives, starts elsewhere): the geometry's origin is that point's.
-    Multi-component scalars are refused here.
+    The gray values are the point array ``array_name`` (what a filter's
+    ``SetInputArrayToProcess`` chose), else the active point scalars. Multi-component
+    arrays are refused here.
     """
     dims = image.GetDimensions()
     pd = image.GetPointData()
-    scalars = pd.GetScalars()
+    scalars = pd.GetScalars() if not array_name else pd.GetArray(array_name)
+    if scalars is None and array_name:
+        names = [pd.GetArrayName(i) for i in range(pd.GetNumberOfArrays())]
+        raise InputError(f"image: no point array named {array_name!r} (its point arrays: "
+                         f"{', '.join(map(str, names)) or 'none'})")
     if scalars is None:
         names = [pd.GetArrayName(i) for i in range(pd.GetNumberOfArrays())]
         raise InputError("image: the vtkImageData has no active point scalars"

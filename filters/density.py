@@ -11,7 +11,7 @@ from .base import CTSegAlgorithm, spec_names
 from .convert import _point_array, image_to_array
 
 
-def image_input(in_info, port=0):
+def image_input(in_info, port=0, array_name=None):
     """The vtkImageData on ``port`` as (array, ImageGeometry, image): a (rows, cols) slice
     (z dimension 1) or an (nz, ny, nx) volume of at least 2 voxels along every axis (the
     3D stages' input).
@@ -24,7 +24,7 @@ def image_input(in_info, port=0):
     image = vtkImageData.GetData(in_info[port], 0)
     if image is None:
         raise InputError(f"input {port}: expected a vtkImageData")
-    arr, geom = image_to_array(image)
+    arr, geom = image_to_array(image, array_name)
     if arr.ndim == 3 and min(arr.shape) < 2:
         raise InputError(f"image: shape {arr.shape} (z, y, x); a volume needs at least 2 "
                          "voxels along every axis, and a single slice must lie in the z plane")
@@ -54,7 +54,7 @@ class DensityMapFilter(CTSegAlgorithm):
         return self.GetParameters()
 
     def _request(self, request, in_info, out_info):
-        arr, geom, image = image_input(in_info)
+        arr, geom, image = image_input(in_info, array_name=self.gray_array_name())
         self.UpdateProgress(0.0)
         if arr.ndim == 2:
             rho = density_map(arr, **self.density_kwargs())

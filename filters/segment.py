@@ -84,7 +84,7 @@ class CTSegmentFilter(CTSegAlgorithm):
         return 1
 
     def _request(self, request, in_info, out_info):
-        arr, geom = image_to_array(self._input(in_info))
+        arr, geom = image_to_array(self._input(in_info), self.gray_array_name())
         three_d = self._mode == "3d"  # as the output's type was chosen
         if three_d and arr.ndim != 3:
             raise InputError(f"image: shape {arr.shape} is one slice; Mode '3d' needs a volume "

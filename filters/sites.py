@@ -92,7 +92,7 @@ class CVTSitesFilter(CTSegAlgorithm):
         super().__init__(input_type="vtkImageData", output_type="vtkPolyData")
 
     def _request(self, request, in_info, out_info):
-        arr, geom, image = image_input(in_info)
+        arr, geom, image = image_input(in_info, array_name=self.gray_array_name())
         dens = image.GetPointData().GetArray("density")
         if dens is None:
             raise InputError("image: no 'density' point array; connect a DensityMapFilter first")

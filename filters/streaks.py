@@ -37,12 +37,16 @@ class MetalStreakFilter(CTSegAlgorithm):
         fix = correct_streaks(arr, self.params)
         out = vtkImageData.GetData(out_info, 0)
         out.ShallowCopy(image)
-        scalars = image.GetPointData().GetScalars()
+        name = self.gray_array_name()
+        scalars = image.GetPointData().GetArray(name) if name else image.GetPointData().GetScalars()
         pd = out.GetPointData()
         if scalars.GetName():
             pd.RemoveArray(scalars.GetName())
         pd.AddArray(_point_array(arr, "original"))
+        active = pd.GetScalars()  # another array than the one corrected: SetScalars drops it
         pd.SetScalars(_point_array(fix.image, scalars.GetName() or "scalars"))
+        if active is not None:
+            pd.AddArray(active)
         for name, value in (("streak_weight", fix.weight), ("streak_explained", fix.explained),
                             ("streak_max_change", fix.max_change),
                             ("streak_halo_px", fix.halo_px)):

@@ -59,7 +59,7 @@ class MeshAndImageFilter(CTSegAlgorithm):
 
     def _request(self, request, in_info, out_info):
         mesh_in = vtkDataObject.GetData(in_info[0], 0)
-        arr, geom, _ = image_input(in_info, port=1)
+        arr, geom, _ = image_input(in_info, port=1, array_name=self.gray_array_name())
         grid = mesh_in is not None and mesh_in.IsA("vtkUnstructuredGrid")
         if not (grid or (mesh_in is not None and mesh_in.IsA("vtkPolyData"))):
             got = mesh_in.GetClassName() if mesh_in is not None else "nothing"

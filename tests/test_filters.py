@@ -474,3 +474,46 @@ def test_delaunay_stage_on_a_rotated_anisotropic_slice():
     assert mesh.GetOutput().GetNumberOfCells() == comp.GetOutput(0).GetNumberOfCells()
     got = numpy_support.vtk_to_numpy(mesh.GetOutput().GetPoints().GetData())
     assert np.isfinite(got).all()
+
+
+def test_the_gray_values_can_be_a_point_array_that_is_not_active():
+    """VTK's SetInputArrayToProcess (ParaView's "Gray Values") picks the point array the
+    filters read; without it they read the active scalars. Here the active array is a
+    label map and the gray values another array: the composite and the stages given the
+    gray array's name give what ctseg gives on it; a wrong name is refused, naming the
+    arrays there are."""
+    from vtkmodules.util import numpy_support
+    from vtkmodules.vtkCommonDataModel import vtkDataObject
+
+    from ctseg.beam_hardening import correct_streaks
+    from ctseg.filters.convert import _point_array
+
+    img = make_phantom(64, seed=0).image.astype(float)
+    image = array_to_image((img > img.mean()).astype(float), name="labels")
+    image.GetPointData().AddArray(_point_array(img, "gray"))
+
+    def choose(f, name="gray"):
+        f.SetInputArrayToProcess(0, 0, 0, vtkDataObject.FIELD_ASSOCIATION_POINTS, name)
+        return f
+
+    ref = ctseg.segment_image(img, n_sites=80)
+    seg = choose(CTSegmentFilter())
+    seg.SetNumberOfSites(80)
+    _, tri, arrays = polydata_to_arrays(seg.apply(image))
+    assert np.array_equal(tri, ref.triangles) and np.array_equal(arrays["material"], ref.material)
+    np.testing.assert_allclose(arrays["gray"], ref.gray)
+    plain = CTSegmentFilter()
+    plain.SetNumberOfSites(80)
+    assert polydata_to_arrays(plain.apply(image))[2]["gray"].max() <= 1.0  # the labels
+    rho = choose(DensityMapFilter()).apply(image).GetPointData().GetArray("density")
+    np.testing.assert_array_equal(numpy_support.vtk_to_numpy(rho).reshape(img.shape),
+                                  ctseg.density_map(img))
+    fixed = choose(MetalStreakFilter()).apply(image).GetPointData()
+    np.testing.assert_array_equal(numpy_support.vtk_to_numpy(fixed.GetArray("gray")).reshape(img.shape),
+                                  correct_streaks(img).image)
+    assert fixed.GetScalars().GetName() == "gray" and fixed.GetArray("labels") is not None
+    gray = choose(TriangleGrayFilter())
+    got = polydata_to_arrays(gray.apply(seg.GetOutput(), image))[2]["gray"]
+    np.testing.assert_allclose(got, ctseg.triangle_gray(img, ref.points, ref.triangles), rtol=1e-9)
+    with pytest.raises(CTSegError, match=r"no point array named 'grey' \(its point arrays: labels, gray\)"):
+        choose(CTSegmentFilter(), "grey").apply(image)

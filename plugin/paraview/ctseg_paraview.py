@@ -99,6 +99,25 @@ def _groups(names):
     return out
 
 
+def _gray_values(image_port):
+    """The "Gray Values" property: the image's point array read as the gray values, sent to
+    VTK's SetInputArrayToProcess (``ctseg.filters`` read it as array 0; the default is the
+    image's active scalars)."""
+    def carrier(self):
+        """Carries the property's declaration; ParaView calls SetInputArrayToProcess."""
+
+    carrier.__name__ = carrier.__qualname__ = "GrayValues"
+    doc = escape("The image's point array read as the gray values (default: its active scalars).")
+    return smproperty.xml(
+        '<StringVectorProperty name="GrayValues" label="Gray Values" '
+        'command="SetInputArrayToProcess" number_of_elements="5" element_types="0 0 0 0 2" '
+        f'animateable="0"><ArrayListDomain name="array_list" attribute_type="Scalars" '
+        f'input_domain_name="gray_values_array">'
+        f'<RequiredProperties><Property name="{image_port}" function="Input"/>'
+        f'</RequiredProperties></ArrayListDomain><Documentation>{doc}</Documentation>'
+        '</StringVectorProperty>')(carrier)
+
+
 def proxy(base, name, label, doc, inputs=(("Input", 0, "vtkImageData"),), outputs=()):
     """A ParaView filter proxy over ctseg filter class ``base``: its spec parameters as
     properties, its inputs as (port name, port index, data type) in port order, its
@@ -115,11 +134,17 @@ def proxy(base, name, label, doc, inputs=(("Input", 0, "vtkImageData"),), output
 
         namespace["_property_groups"] = smproperty.xml("".join(_groups(base.PARAMETERS)))(
             property_groups)
+    images = [port_name for port_name, _, data_type in inputs if data_type == "vtkImageData"]
+    if images:  # ParaView writes declarations sorted by name: GrayValues before the Set...
+        namespace["GrayValues"] = _gray_values(images[0])
     cls = type(name, (base,), namespace)
     for port_name, index in outputs:
         cls = smproperty.xml(f'<OutputPort name="{port_name}" index="{index}"/>')(cls)
     for port_name, index, data_type in inputs:
         cls = smdomain.datatype(dataTypes=[data_type], composite_data_supported=False)(cls)
+        if port_name in images[:1]:  # the arrays Gray Values offers: the image's point arrays
+            cls = smdomain.xml('<InputArrayDomain name="gray_values_array" '
+                               'attribute_type="point" number_of_components="1"/>')(cls)
         cls = smproperty.input(name=port_name, port_index=index)(cls)
     return smproxy.filter(name=name, label=label)(smhint.xml(MENU)(cls))
 

@@ -147,6 +147,35 @@ def _():
     assert np.allclose(got.reshape(g.shape), want), "DensityRidge/DensitySaturation not applied"
 
 
+@check("Gray Values: a point array that is not the active scalars")
+def _():
+    from ctseg.filters.convert import _point_array
+    from vtkmodules.vtkIOXML import vtkXMLImageDataWriter
+    from paraview.simple import XMLImageDataReader
+
+    img = phantom.image[3]
+    image = array_to_image((img > img.mean()).astype(float), GEOM, name="labels")
+    image.GetPointData().AddArray(_point_array(img, "gray"))
+    w = vtkXMLImageDataWriter()
+    w.SetFileName(os.path.join(tmp, "two_arrays.vti"))
+    w.SetInputData(image)
+    w.Write()
+    reader = XMLImageDataReader(FileName=[os.path.join(tmp, "two_arrays.vti")])
+    plain = CTSegment(Input=reader, NumberOfSites=300)  # noqa: F821
+    chosen = CTSegment(Input=reader, NumberOfSites=300, GrayValues=["POINTS", "gray"])  # noqa: F821
+    gray_png = CTSegment(Input=write_vti(os.path.join(tmp, "gray.vti"), img, GEOM),  # noqa: F821
+                         NumberOfSites=300)
+    a, b = polydata_to_arrays(fetch(chosen)), polydata_to_arrays(fetch(gray_png))
+    assert np.array_equal(a[1], b[1]) and np.array_equal(a[2]["material"], b[2]["material"])
+    assert polydata_to_arrays(fetch(plain))[2]["gray"].max() <= 1.0  # the labels
+    dens = CTDensityMap(Input=reader, GrayValues=["POINTS", "gray"])  # noqa: F821
+    rho = numpy_support.vtk_to_numpy(fetch(dens).GetPointData().GetArray("density"))
+    assert np.allclose(rho.reshape(img.shape), density_map(img))
+    cut = CTGraphCut(Mesh=chosen, Image=reader)  # noqa: F821 - the image is port 1's
+    assert cut.SMProxy.GetProperty("GrayValues") is not None
+    assert CTDelaunayMesh(Input=chosen).SMProxy.GetProperty("GrayValues") is None  # noqa: F821
+
+
 @check("errors: a parameter the input cannot take leaves an empty output, not a wrong one")
 def _():
     too_many = phantom.image.shape[1] * phantom.image.shape[2] + 1  # sites per slice

@@ -63,7 +63,10 @@ def _():
     w.Write()
     reader = pvs.OpenDataFile(path)
     pvs.RenameSource("part.vti", reader)
+    reader.UpdatePipeline()  # as Apply does before a filter is added in the GUI
     seg = pvs.CTSegment(Input=reader, Mode="3d")
+    # Gray Values offers the image's point arrays and starts on its active scalars
+    assert list(seg.GrayValues) == ["POINTS", "scalars"], seg.GrayValues
     pvs.RenameSource("CT Segment", seg)
     view = pvs.GetActiveViewOrCreate("RenderView")
     t0 = time.perf_counter()
