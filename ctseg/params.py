@@ -43,12 +43,13 @@ class DensityParams(_Group):
                                      "map", "px", low=0.0, high=10.0, vtk="DensitySigma")
     density_floor: float = _param(0.02, "float", "density added everywhere so that flat "
                                   "regions keep sites", low=0.0, high=1.0, low_open=True)
-    density_saturation: float = _param(AUTO, "float", "gradient that gets the full density, "
-                                       "as a fraction of the largest; 1 = the paper's "
-                                       "normalisation; auto = from the noise", low=0.0,
-                                       high=1.0, low_open=True, auto=True)
-    density_ridge: float = _param(2.0, "float", "ridge sharpening exponent (0 = the paper's "
-                                  "map)", low=0.0, high=8.0)
+    density_saturation: float = _param(AUTO, "float", "gradient that gets the full density, as a fraction of "
+                                       "the largest; 1 = the paper's normalisation; auto = from the noise",
+                                       low=0.0, high=1.0, low_open=True, auto=True)
+    density_ridge: float = _param(2.0, "float", "ridge sharpening exponent (0 = the paper's map)", low=0.0, high=8.0)
+    density_small_boost: float = _param(1.0, "float", "slices: density times this on small closed features' "
+                                        "edges (at most 16 px across: a pin, a pore) and 2 px around; 1 = off",
+                                        low=1.0, high=100.0)
 
 
 @dataclass(frozen=True)

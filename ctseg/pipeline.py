@@ -25,7 +25,7 @@ from .triangle_gray import triangle_gray
 from .triangulation import delaunay_mesh
 
 DENSITY_KEYS = ("density_sigma_px", "density_floor", "density_saturation", "density_ridge")
-"""The parameters of :func:`ctseg.density_map`."""
+"""The parameters of the 2D and 3D density maps (2D adds ``density_small_boost``)."""
 
 
 def stage_runner(report, times, peaks_mib=None):
@@ -227,7 +227,8 @@ def segment_image(image, params=None, *, progress=None, gray_scale=None, levels_
     else:
         site_report = {"n_sites": int(n_sites), "rule": "given", "reason": "n_sites given",
                        "boundary_px": None}
-    rho = timed("density", 0.01, density_map, img, **{k: getattr(p, k) for k in DENSITY_KEYS})
+    rho = timed("density", 0.01, density_map, img, density_small_boost=p.density_small_boost,
+                **{k: getattr(p, k) for k in DENSITY_KEYS})
     sites0 = timed("initial_sites", 0.03, initial_sites, rho, n_sites, init=p.init,
                    seed=p.seed, ward_block_px=p.ward_block_px)
     cvt = timed("cvt", 0.2, lloyd_cvt, rho, sites0, tol_px=p.tol_px, max_iter=p.max_iter,

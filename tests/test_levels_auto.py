@@ -364,3 +364,18 @@ def test_a_dense_region_needs_a_3x3_core_to_be_a_material():
     hot[50:54, 150:154] = 250.0
     (level,) = tail_levels(hot, [10.0, 100.0], sep)
     assert level > 200.0
+
+
+def test_small_features_get_more_sites_with_the_density_boost():
+    """density_small_boost (off by default) gives the pin's edges four times the density:
+    twice the sites around it, and its Dice 0.78 -> 0.97 (256 px, radius 4)."""
+    from ctseg.metrics import matched_dice_per_label
+
+    img, truth = _pin_in_disc(256, 4)
+    dice = []
+    for boost in (1.0, 4.0):
+        seg = ctseg.segment_image(img, density_small_boost=boost)
+        pred = label_image(seg.points, seg.triangles, seg.material, seg.shape)
+        near = np.hypot(*(seg.points - np.argwhere(truth == 2).mean(0)[::-1]).T) < 8
+        dice.append((matched_dice_per_label(pred, truth)[2], int(near.sum())))
+    assert dice[1][0] >= 0.9 > dice[0][0] and dice[1][1] > 1.5 * dice[0][1], dice
