@@ -92,12 +92,18 @@ def density_map(image, density_sigma_px=DEFAULTS.density_sigma_px,
     >>> bool(rho[:, 15:17].mean() > rho[:, :8].mean())
     True
     """
+    rho = _gradient_density(image, density_sigma_px, density_floor, density_saturation, density_ridge)
+    boost = check("density_small_boost", density_small_boost)
+    return _boost_small_features(rho, density_floor, boost) if boost != 1.0 else rho
+
+
+def _gradient_density(image, density_sigma_px, density_floor, density_saturation, density_ridge):
+    """:func:`density_map` without the small features' boost (what the flat pixels see)."""
     img = as_image(image)
     sigma = check("density_sigma_px", density_sigma_px)
     floor = check("density_floor", density_floor)
     saturation = check("density_saturation", density_saturation)
     ridge = check("density_ridge", density_ridge)
-    boost = check("density_small_boost", density_small_boost)
     # Normalise first so that huge value ranges (1e30) cannot overflow the gradient.
     span = float(img.max() - img.min())
     if span == 0.0:
@@ -106,8 +112,7 @@ def density_map(image, density_sigma_px=DEFAULTS.density_sigma_px,
     smooth = ndimage.gaussian_filter(img, sigma, mode="nearest") if sigma > 0 else img
     gy, gx = np.gradient(smooth)
     mag = np.hypot(gx, gy)
-    rho = _rho_from_gradient(mag, floor, saturation, ridge, 2 * int(np.ceil(max(sigma, 0.5))) + 1)
-    return _boost_small_features(rho, floor, boost) if boost != 1.0 else rho
+    return _rho_from_gradient(mag, floor, saturation, ridge, 2 * int(np.ceil(max(sigma, 0.5))) + 1)
 
 
 def _boost_small_features(rho, floor, boost):
@@ -255,9 +260,7 @@ def flat_pixels(image, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAU
     >>> bool(flat[:, 0].all()), bool(flat[:, 9:11].any())
     (True, False)
     """
-    strength = density_map(image, density_sigma_px=flat_sigma_px, density_floor=density_floor,
-                           density_saturation=density_saturation, density_ridge=0.0,
-                           density_small_boost=1.0)
+    strength = _gradient_density(image, flat_sigma_px, density_floor, density_saturation, 0.0)
     return (strength - density_floor) < 0.5
 
 
