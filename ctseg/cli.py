@@ -258,7 +258,8 @@ def _summary(args, image, diag, written):
               + ", ".join(f"{k} {v:.2f} s" for k, v in diag["slice_times_s"].items()))
     outs = written + [p for p in (args.boundary, args.report, args.figure) if p]
     print(f"mesh checks: {'passed' if diag['mesh_checks']['ok'] else 'FAILED'}; wrote {', '.join(outs)}")
-    print("".join(f"{note}\n" for note in _stale_notes(outs)), end="")
+    for note in _stale_notes(outs):
+        print(note)
     if "accuracy" in diag:
         acc = diag["accuracy"]
         print("Dice per material: " + ", ".join(f"{d:.4f}" for d in acc["dice"])

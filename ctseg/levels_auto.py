@@ -150,24 +150,23 @@ def tail_levels(g255, levels, separation, mask=None, below=True):
     in_slice = np.zeros((3, 3, 3), bool)
     in_slice[1] = True
     added = []
-    sides = [(keep & (sm > hi + separation(hi)), 100.0 - TAIL_LEVEL_PCT)]
+    sides = [(keep & (sm > hi + separation(hi)), 100.0 - TAIL_LEVEL_PCT, True)]
     if below:
-        sides.insert(0, (keep & (sm < lo - separation(lo)), TAIL_LEVEL_PCT))
-    for beyond, pct in sides:
+        sides.insert(0, (keep & (sm < lo - separation(lo)), TAIL_LEVEL_PCT, False))
+    for beyond, pct, above in sides:
         regions, n_regions = label(beyond, in_slice)
         size = np.bincount(regions.ravel(), minlength=n_regions + 1)
         size[0] = 0
         tail = size[regions] >= TAIL_MIN_REGION_PX
-        if pct > 50.0 and n and 0 < tail.sum() < TAIL_MIN_FRACTION * n:
+        if above and 0 < tail.sum() < TAIL_MIN_FRACTION * n:
             # fewer: a dense insert if a whole 3 x 3 square of its pixels lies beyond
             core = minimum_filter(g.reshape(sm.shape), size=(1, 3, 3)) > hi + separation(hi)
             dense = np.zeros(n_regions + 1, bool)
             dense[regions[core & tail]] = True
-            dense[0] = False
             tail = dense[regions]
-            if tail.any():
-                added.append(float(np.percentile(sm[tail], pct)))
-        elif n and tail.sum() >= TAIL_MIN_FRACTION * n:
+        elif tail.sum() < TAIL_MIN_FRACTION * n:
+            continue
+        if tail.any():
             added.append(float(np.percentile(sm[tail], pct)))
     return added
 

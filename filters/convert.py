@@ -54,16 +54,14 @@ def image_to_array(image, array_name=None):
     """
     dims = image.GetDimensions()
     pd = image.GetPointData()
-    scalars = pd.GetScalars() if not array_name else pd.GetArray(array_name)
-    if scalars is None and array_name:
-        names = [pd.GetArrayName(i) for i in range(pd.GetNumberOfArrays())]
-        raise InputError(f"image: no point array named {array_name!r} (its point arrays: "
-                         f"{', '.join(map(str, names)) or 'none'})")
+    scalars = pd.GetArray(array_name) if array_name else pd.GetScalars()
     if scalars is None:
-        names = [pd.GetArrayName(i) for i in range(pd.GetNumberOfArrays())]
+        names = ", ".join(str(pd.GetArrayName(i)) for i in range(pd.GetNumberOfArrays()))
+        if array_name:
+            raise InputError(f"image: no point array named {array_name!r} (its point arrays: "
+                             f"{names or 'none'})")
         raise InputError("image: the vtkImageData has no active point scalars"
-                         + (f" (its point arrays: {', '.join(map(str, names))}; make one active)"
-                            if names else
+                         + (f" (its point arrays: {names}; make one active)" if names else
                             " (cell data? convert with vtkCellDataToPointData)"
                             if image.GetCellData().GetNumberOfArrays() else ""))
     if scalars.GetNumberOfComponents() != 1:

@@ -37,8 +37,8 @@ class MetalStreakFilter(CTSegAlgorithm):
         fix = correct_streaks(arr, self.params)
         out = vtkImageData.GetData(out_info, 0)
         out.ShallowCopy(image)
-        name = self.gray_array_name()
-        scalars = image.GetPointData().GetArray(name) if name else image.GetPointData().GetScalars()
+        chosen = self.gray_array_name()
+        scalars = image.GetPointData().GetArray(chosen) if chosen else image.GetPointData().GetScalars()
         pd = out.GetPointData()
         if scalars.GetName():
             pd.RemoveArray(scalars.GetName())

@@ -275,15 +275,14 @@ def stale_siblings(written):
     import glob
     import re
 
-    stale = []
-    for path in written:
-        m = re.fullmatch(r"(.*)_material\d+(\.(?:stl|ply))", os.fspath(path), re.IGNORECASE)
-        if m:
-            pattern = glob.escape(m.group(1)) + "_material*" + glob.escape(m.group(2))
-            stale += [p for p in glob.glob(pattern)
-                      if re.fullmatch(re.escape(m.group(1)) + r"_material\d+" + re.escape(m.group(2)),
-                                      p, re.IGNORECASE) and p not in written]
-    return sorted(set(stale))
+    written = {os.fspath(p) for p in written}
+    groups = {m.groups() for m in (re.fullmatch(r"(.*_material)\d+(\.(?:stl|ply))", p, re.IGNORECASE)
+                                   for p in written) if m}
+    stale = set()
+    for stem, ext in groups:  # one listing per output, not per material
+        ours = re.compile(re.escape(stem) + r"\d+" + re.escape(ext))
+        stale |= {p for p in glob.glob(glob.escape(stem) + "*" + glob.escape(ext)) if ours.fullmatch(p)}
+    return sorted(stale - written)
 
 
 def write_polydata(poly, path):
