@@ -2,7 +2,8 @@
 element that straddles a boundary between two materials averages them, and that average
 can be the gray of a third material (a tetrahedron half aluminium, half air reads as
 polymer). Its voxels tell: each voxel votes for the material whose gray level is nearest
-its own, and a tetrahedron whose own material gets less than :data:`MIXED_OWN_SHARE` of
+its own, or, inside a transition between a lower and a higher material, for the nearer of
+those two (:func:`transition_votes`: the blur's voxels read as the middle material too), and a tetrahedron whose own material gets less than :data:`MIXED_OWN_SHARE` of
 its volume while one material gets at least half takes that material, if a face
 neighbour has it and it is the lowest or the highest of those holding at least
 :data:`MIXED_MIN_SHARE` of the votes: the blur between two materials gives voxels of
@@ -79,6 +80,92 @@ def tetra_spread(volume_255, overlaps, mean_255=None):
     return spread, voxel_noise(vol)
 
 
+TRANSITION_STEP_VOX = 1.5
+"""How far along its gradient, each way, :func:`transition_votes` looks from a voxel."""
+
+
+def _index_gradient(vol, idx):
+    """Gradient (index units, order z, y, x) of ``vol`` at the flat indices ``idx``: the
+    central difference along each axis averaged over the 3 x 3 voxels across it, which
+    keeps its direction steady under noise."""
+    shape = np.array(vol.shape)
+    zyx = np.stack(np.unravel_index(idx, vol.shape), axis=1)
+    flat = vol.ravel()
+    grad = np.zeros((len(idx), 3))
+    offsets = [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1)]
+    for axis in range(3):
+        across = [ax for ax in range(3) if ax != axis]
+        for a, b in offsets:
+            for sign in (-1, 1):
+                q = zyx.copy()
+                q[:, axis] += sign
+                q[:, across[0]] += a
+                q[:, across[1]] += b
+                q = np.clip(q, 0, shape - 1)
+                grad[:, axis] += sign * flat[np.ravel_multi_index(q.T, vol.shape)]
+    return grad / 18.0
+
+
+def transition_votes(volume_255, voxel, level_255, vote):
+    """Votes of the voxels inside a transition between two materials that read as a third
+    in between: such a voxel votes for the nearer of the two (by the half-way gray between
+    them), not for the level its gray happens to be nearest.
+
+    A voxel voting for an intermediate level b is inside a transition when the volume
+    :data:`TRANSITION_STEP_VOX` voxels down its gradient is nearest a level below b and
+    as far up it nearest a level above b: the blur of a step between air and aluminium
+    passes through the polymer's gray, but a polymer region is polymer that far in.
+
+    Parameters
+    ----------
+    volume_255 : (nz, ny, nx) float ndarray
+    voxel : (r,) int ndarray, flat indices into the volume
+    level_255 : (K,) float ndarray, ascending
+    vote : (r,) int ndarray, each voxel's nearest level
+
+    Returns
+    -------
+    (r,) int64 ndarray, the votes
+
+    Notes
+    -----
+    A layer of the middle material thinner than about twice the step reads as a
+    transition too (its elements then go by their share of votes, as before).
+
+    Example
+    -------
+    >>> from scipy.ndimage import gaussian_filter
+    >>> vol = np.zeros((5, 5, 10)); vol[:, :, 5:] = 100.0
+    >>> vol = gaussian_filter(vol, 0.8)  # x = 4, 5 read 25.1 and 74.9: nearest 50
+    >>> voxel = np.ravel_multi_index((2, 2, 4), vol.shape) + np.arange(2)
+    >>> transition_votes(vol, voxel, np.array([0.0, 50.0, 100.0]), np.array([1, 1])).tolist()
+    [0, 2]
+    """
+    from scipy.ndimage import map_coordinates
+
+    level = np.asarray(level_255, float)
+    vote = np.asarray(vote, np.int64).copy()
+    ask = np.flatnonzero((vote > 0) & (vote < len(level) - 1))
+    if not len(ask):
+        return vote
+    idx, inverse = np.unique(voxel[ask], return_inverse=True)
+    grad = _index_gradient(volume_255, idx)
+    norm = np.linalg.norm(grad, axis=1)
+    unit = grad / np.maximum(norm, 1e-12)[:, None]
+    zyx = np.stack(np.unravel_index(idx, volume_255.shape), axis=1).astype(float)
+    step = TRANSITION_STEP_VOX * unit
+    lo, hi = (map_coordinates(volume_255, (zyx + sgn * step).T, order=1, mode="nearest")
+              for sgn in (-1.0, 1.0))
+    lo_level, hi_level = (np.argmin(np.abs(v[:, None] - level[None, :]), axis=1) for v in (lo, hi))
+    own = volume_255.ravel()[idx]
+    b = vote[ask]
+    lo_level, hi_level, own = lo_level[inverse], hi_level[inverse], own[inverse]
+    inside = (norm[inverse] > 0) & (lo_level < b) & (hi_level > b)
+    half = 0.5 * (level[lo_level] + level[hi_level])
+    vote[ask[inside]] = np.where(own[inside] < half[inside], lo_level[inside], hi_level[inside])
+    return vote
+
+
 def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(1.0, 1.0, 1.0),
                   mean_255=None, adjacency=None, overlaps=None, spread=None):
     """Relabel the mixed tetrahedra by their voxels' votes (see the module's docstring).
@@ -136,6 +223,7 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
         return material, 0
     tet, voxel, overlap = overlaps.rows(asked)
     vote = np.argmin(np.abs(vol.ravel()[voxel][:, None] - level[None, :]), axis=1)
+    vote = transition_votes(vol, voxel, level, vote)
     votes = np.zeros((len(asked), len(level)))
     np.add.at(votes, (tet, vote), overlap)
     share = votes / np.maximum(votes.sum(axis=1, keepdims=True), 1e-300)
