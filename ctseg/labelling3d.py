@@ -12,7 +12,7 @@ from .errors import InputError
 from .labelling import CUT_KEYS
 from .levels import volume_levels
 from .levels3d import checked_levels
-from .mixed_tetra import relabel_beyond_iso50, relabel_mixed, tetra_spread
+from .mixed_tetra import own_vote_share, relabel_beyond_iso50, relabel_mixed, tetra_spread
 from .params import AUTO, resolve
 from .partial_volume import claim_missing_levels, relabel_partial_volume_pieces
 from .recursive_cut import order_by_gray, resolved_min_material_area, segment_triangles
@@ -155,7 +155,8 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
                            levels, mesh.adjacency, 3.0 * pixel_sigma)
     layer_vox = 4.0 * resolved_min_material_area(p.min_material_area, volume_vox)
     material, pieces = run("piece_relabel", 0.897, relabel_partial_volume_pieces, f255,
-                           material, levels, mesh.adjacency, volume_vox, interior, layer_vox)
+                           material, levels, mesh.adjacency, volume_vox, interior, layer_vox,
+                           own_share=lambda el: own_vote_share(vol255, overlaps, material, levels, el))
     if p.n_materials != AUTO and p.gray_levels == AUTO:  # the K materials asked for get elements
         material = claim_missing_levels(f255, material, levels, mesh.adjacency)
     material, relabelled = run("manifold_repair", 0.9, repair_pinched_edges, mesh, material,

@@ -166,6 +166,49 @@ def transition_votes(volume_255, voxel, level_255, vote):
     return vote
 
 
+def _vote_shares(vol, overlaps, which, level):
+    """(len(which), K): each tetrahedron's share of its voxels' votes for each level."""
+    tet, voxel, overlap = overlaps.rows(which)
+    vote = np.argmin(np.abs(vol.ravel()[voxel][:, None] - level[None, :]), axis=1)
+    vote = transition_votes(vol, voxel, level, vote)
+    votes = np.zeros((len(which), len(level)))
+    np.add.at(votes, (tet, vote), overlap)
+    return votes / np.maximum(votes.sum(axis=1, keepdims=True), 1e-300)
+
+
+def own_vote_share(volume_255, overlaps, material, level_255, which):
+    """Share of each tetrahedron's voxels' votes (as :func:`relabel_mixed` counts them)
+    that goes to its own material.
+
+    Parameters
+    ----------
+    volume_255 : (nz, ny, nx) array_like
+    overlaps : ctseg.tetra_gray.VoxelOverlaps
+    material : (m,) int array_like, index into ``level_255``
+    level_255 : (K,) array_like, ascending
+    which : (r,) int array_like, the tetrahedra asked
+
+    Returns
+    -------
+    (r,) ndarray
+
+    Example
+    -------
+    >>> from ctseg.tetrahedra import delaunay_tetrahedra
+    >>> cube = delaunay_tetrahedra(np.array([[x, y, z] for x in (0, 3) for y in (0, 3)
+    ...                                      for z in (0, 3)], float), (3, 3, 3))
+    >>> vol = np.zeros((4, 4, 4)); vol[:, :, 2:] = 100.0
+    >>> ov = VoxelOverlaps(cube.points, cube.tetrahedra, vol.shape)
+    >>> share = own_vote_share(vol, ov, np.zeros(6, int), [0.0, 100.0], np.arange(6))
+    >>> bool(np.all((share > 0) & (share < 1)))
+    True
+    """
+    vol = np.asarray(volume_255, float)
+    which = np.asarray(which, np.int64)
+    share = _vote_shares(vol, overlaps, which, np.asarray(level_255, float))
+    return share[np.arange(len(which)), np.asarray(material, np.int64)[which]]
+
+
 def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(1.0, 1.0, 1.0),
                   mean_255=None, adjacency=None, overlaps=None, spread=None):
     """Relabel the mixed tetrahedra by their voxels' votes (see the module's docstring).
@@ -221,12 +264,7 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
     asked = np.flatnonzero(spread > MIXED_NOISE_SPREAD * noise)
     if not len(asked):
         return material, 0
-    tet, voxel, overlap = overlaps.rows(asked)
-    vote = np.argmin(np.abs(vol.ravel()[voxel][:, None] - level[None, :]), axis=1)
-    vote = transition_votes(vol, voxel, level, vote)
-    votes = np.zeros((len(asked), len(level)))
-    np.add.at(votes, (tet, vote), overlap)
-    share = votes / np.maximum(votes.sum(axis=1, keepdims=True), 1e-300)
+    share = _vote_shares(vol, overlaps, asked, level)
     own = share[np.arange(len(asked)), material[asked]]
     winner = np.argmax(share, axis=1)
     present = share >= MIXED_MIN_SHARE

@@ -205,8 +205,13 @@ def claim_missing_levels(f, material, levels, adjacency):
     return material
 
 
+PIECE_OWN_SHARE = 0.3
+"""A piece with interior elements whose voxels give its own material less than this share
+of their votes is a mix all the same (:func:`relabel_partial_volume_pieces`)."""
+
+
 def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior,
-                                  max_size=np.inf):
+                                  max_size=np.inf, own_share=None):
     """Pieces of a material between a darker and a brighter one, made of boundary
     elements only, take the darkest or brightest material they touch.
 
@@ -219,7 +224,10 @@ def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior
     brightest material it touches, whichever level is nearer its size-weighted mean gray:
     never another material in between, which would only be a mix again. A piece of
     ``max_size`` or more is a thin layer (the recursive cut's thin-layer rule decides
-    those); where no element is interior, nothing is relabelled.
+    those); where no element is interior, nothing is relabelled. With ``own_share``, a
+    piece that holds interior elements is a mix too when its elements' voxels give its
+    own material less than :data:`PIECE_OWN_SHARE` of their votes (size-weighted): next
+    to a far denser material the flat test calls elements of a blurred edge interior.
 
     Parameters
     ----------
@@ -236,6 +244,9 @@ def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior
         Elements inside a material (away from its edges).
     max_size : float
         Pieces this large or larger are kept.
+    own_share : callable, optional
+        ``own_share(elements)``: for each of those element indices, the share of its
+        voxels' votes for its own material (:func:`ctseg.mixed_tetra.own_vote_share`).
 
     Returns
     -------
@@ -276,6 +287,12 @@ def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior
     between = (darkest < piece_mat) & (brightest > piece_mat)
     dark, bright = np.minimum(darkest, len(level) - 1), np.maximum(brightest, 0)
     nearest = np.where(piece_gray - level[dark] <= level[bright] - piece_gray, dark, bright)
-    flip = between & ~has_interior & (piece_size < max_size)
+    flip = between & (piece_size < max_size)
+    mixed = ~has_interior
+    if own_share is not None and (flip & has_interior).any():
+        el = np.flatnonzero((flip & has_interior)[piece])
+        share = np.bincount(piece[el], size[el] * own_share(el), n_pieces)
+        mixed |= share < PIECE_OWN_SHARE * piece_size
+    flip &= mixed
     mat[flip[piece]] = nearest[piece[flip[piece]]]
     return mat, int(flip.sum())
