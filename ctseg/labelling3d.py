@@ -156,7 +156,7 @@ def label_tetrahedra(image, mesh, gray, params=None, spacing=None, *, levels=Non
     layer_vox = 4.0 * resolved_min_material_area(p.min_material_area, volume_vox)
     material, pieces = run("piece_relabel", 0.897, relabel_partial_volume_pieces, f255,
                            material, levels, mesh.adjacency, volume_vox, interior, layer_vox,
-                           own_share=lambda el: own_vote_share(vol255, overlaps, material, levels, el))
+                           own_share=lambda el, m: own_vote_share(vol255, overlaps, m, levels, el))
     if p.n_materials != AUTO and p.gray_levels == AUTO:  # the K materials asked for get elements
         material = claim_missing_levels(f255, material, levels, mesh.adjacency)
     material, relabelled = run("manifold_repair", 0.9, repair_pinched_edges, mesh, material,

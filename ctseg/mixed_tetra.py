@@ -22,6 +22,9 @@ MIXED_OWN_SHARE = 0.3
 """A tetrahedron whose own material gets less than this share of its voxels' votes is
 relabelled (when another gets at least half)."""
 
+MIXED_WIN_SHARE = 0.5
+"""The material a relabelled tetrahedron takes holds at least this share of the votes."""
+
 MIXED_MIN_SHARE = 0.1
 """Materials with less than this share of a tetrahedron's votes do not count among its
 constituents."""
@@ -271,7 +274,7 @@ def relabel_mixed(volume_255, points, tetrahedra, material, level_255, spacing=(
     idx = np.arange(len(level))
     lowest = np.where(present, idx, len(level)).min(axis=1)
     highest = np.where(present, idx, -1).max(axis=1)
-    flip = ((own < MIXED_OWN_SHARE) & (share[np.arange(len(asked)), winner] >= 0.5)
+    flip = ((own < MIXED_OWN_SHARE) & (share[np.arange(len(asked)), winner] >= MIXED_WIN_SHARE)
             & ((winner == lowest) | (winner == highest)))
     if adjacency is not None:
         adj = np.asarray(adjacency, np.int64).reshape(-1, 2)

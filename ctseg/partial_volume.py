@@ -211,7 +211,7 @@ of their votes is a mix all the same (:func:`relabel_partial_volume_pieces`)."""
 
 
 def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior,
-                                  max_size=np.inf, own_share=None):
+                                  max_size=np.inf, own_share=None, max_rounds=4):
     """Pieces of a material between a darker and a brighter one, made of boundary
     elements only, take the darkest or brightest material they touch.
 
@@ -245,14 +245,19 @@ def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior
     max_size : float
         Pieces this large or larger are kept.
     own_share : callable, optional
-        ``own_share(elements)``: for each of those element indices, the share of its
-        voxels' votes for its own material (:func:`ctseg.mixed_tetra.own_vote_share`).
+        ``own_share(elements, material)``: for each of those element indices, the share of
+        its voxels' votes for its material in ``material``
+        (:func:`ctseg.mixed_tetra.own_vote_share`).
+    max_rounds : int
+        Passes over the pieces as the previous pass left them, until nothing moves: a
+        polymer piece between air and aluminium that becomes aluminium while its aluminium
+        neighbour, between it and steel, becomes steel is a new mix of air and steel.
 
     Returns
     -------
     material : (m,) int64 ndarray
     changed : int
-        Pieces relabelled.
+        Pieces relabelled, over all passes.
 
     Example
     -------
@@ -270,6 +275,18 @@ def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior
     interior = np.asarray(interior, bool)
     if len(level) < 3 or len(adj) == 0 or not interior.any():
         return mat, 0
+    total = 0
+    for _ in range(max_rounds):  # a flip can make a new mix: air | polymer | aluminium | steel
+        mat, changed = _pieces_round(f, mat, level, adj, size, interior, max_size, own_share)
+        total += changed
+        if not changed:
+            break
+    return mat, total
+
+
+def _pieces_round(f, mat, level, adj, size, interior, max_size, own_share):
+    """One pass of :func:`relabel_partial_volume_pieces` over the pieces as they are."""
+    mat = mat.copy()
     a, b = adj[:, 0], adj[:, 1]
     same = mat[a] == mat[b]
     n_pieces, piece = connected_pieces(np.column_stack([a[same], b[same]]), len(mat))
@@ -291,7 +308,7 @@ def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior
     mixed = ~has_interior
     if own_share is not None and (flip & has_interior).any():
         el = np.flatnonzero((flip & has_interior)[piece])
-        share = np.bincount(piece[el], size[el] * own_share(el), n_pieces)
+        share = np.bincount(piece[el], size[el] * own_share(el, mat), n_pieces)
         mixed |= share < PIECE_OWN_SHARE * piece_size
     flip &= mixed
     mat[flip[piece]] = nearest[piece[flip[piece]]]

@@ -66,17 +66,31 @@ def test_a_piece_with_interior_elements_whose_voxels_vote_for_others_is_a_mix():
     material = [0, 0, 1, 1, 2, 2]
     f = [0, 0, 40, 45, 100, 100]
     interior = [True, True, True, False, True, True]  # the piece holds an interior element
-    votes_for_others = lambda el: np.full(len(el), 0.1)  # noqa: E731
-    votes_for_itself = lambda el: np.full(len(el), 0.9)  # noqa: E731
+    votes_for_others = lambda el, m: np.full(len(el), 0.1)  # noqa: E731
+    votes_for_itself = lambda el, m: np.full(len(el), 0.9)  # noqa: E731
     new, changed = _relabel_with(f, material, interior, own_share=votes_for_others)
     assert new.tolist() == [0, 0, 0, 0, 2, 2] and changed == 1
     assert _relabel_with(f, material, interior, own_share=votes_for_itself)[1] == 0
     assert _relabel_with(f, material, interior)[1] == 0  # no votes: the interior element keeps it
     # the share is size-weighted over the piece: 3 x 0.1 + 1 x 0.9 of 4 is 0.3, not under it
-    share = lambda el: np.where(np.asarray(el) == 2, 0.1, 0.9)  # noqa: E731
+    share = lambda el, m: np.where(np.asarray(el) == 2, 0.1, 0.9)  # noqa: E731
     assert _relabel_with(f, material, interior, (1, 1, 3, 1, 1, 1), own_share=share)[1] == 0
-    share = lambda el: np.where(np.asarray(el) == 2, 0.0, 0.9)  # noqa: E731
+    share = lambda el, m: np.where(np.asarray(el) == 2, 0.0, 0.9)  # noqa: E731
     assert _relabel_with(f, material, interior, (1, 1, 3, 1, 1, 1), own_share=share)[1] == 1
+
+
+def test_a_mix_made_by_a_flip_is_taken_in_the_next_pass():
+    # air | polymer-gray piece | aluminium-gray piece | steel: the first pass makes the
+    # polymer piece aluminium (nearer its gray 53) and the aluminium piece steel, leaving
+    # aluminium between air and steel, a mix the second pass gives to air
+    levels = [15.0, 40.0, 72.0, 252.0]
+    chain = [[0, 1], [1, 2], [2, 3], [3, 4]]
+    args = ([15, 53, 150, 252, 252], [0, 1, 2, 3, 3], levels, chain, [1] * 5,
+            [True, False, False, True, True])
+    one, _ = relabel_partial_volume_pieces(*args, max_rounds=1)
+    assert one.tolist() == [0, 2, 3, 3, 3]
+    new, changed = relabel_partial_volume_pieces(*args)
+    assert new.tolist() == [0, 0, 3, 3, 3] and changed == 3
 
 
 def _relabel_with(f, material, interior, size=(1.0,) * 6, own_share=None):
