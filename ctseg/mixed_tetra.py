@@ -3,8 +3,9 @@ element that straddles a boundary between two materials averages them, and that 
 can be the gray of a third material (a tetrahedron half aluminium, half air reads as
 polymer). Its voxels tell: each voxel votes for the material whose gray level is nearest
 its own, or, inside a transition between a lower and a higher material, for the nearer of
-those two (:func:`transition_votes`: the blur's voxels read as the middle material too), and a tetrahedron whose own material gets less than :data:`MIXED_OWN_SHARE` of
-its volume while one material gets at least half takes that material, if a face
+those two (:func:`transition_votes`: the blur's voxels read as the middle material too),
+and a tetrahedron whose own material gets less than :data:`MIXED_OWN_SHARE` of its
+volume while one material gets at least :data:`MIXED_WIN_SHARE` takes that material, if a face
 neighbour has it and it is the lowest or the highest of those holding at least
 :data:`MIXED_MIN_SHARE` of the votes: the blur between two materials gives voxels of
 every gray between them, so a mixture is made of its extremes (the blur tail of steel
