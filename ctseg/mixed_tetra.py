@@ -199,13 +199,12 @@ def own_vote_share(volume_255, overlaps, material, level_255, which):
     Example
     -------
     >>> from ctseg.tetrahedra import delaunay_tetrahedra
-    >>> cube = delaunay_tetrahedra(np.array([[x, y, z] for x in (0, 3) for y in (0, 3)
-    ...                                      for z in (0, 3)], float), (3, 3, 3))
-    >>> vol = np.zeros((4, 4, 4)); vol[:, :, 2:] = 100.0
-    >>> ov = VoxelOverlaps(cube.points, cube.tetrahedra, vol.shape)
-    >>> share = own_vote_share(vol, ov, np.zeros(6, int), [0.0, 100.0], np.arange(6))
-    >>> bool(np.all((share > 0) & (share < 1)))
-    True
+    >>> box = np.array([[x, y, z] for x in (0, 5) for y in (0, 5) for z in (0, 5)], float)
+    >>> mesh = delaunay_tetrahedra(box, (5, 5, 5))
+    >>> ov = VoxelOverlaps(mesh.points, mesh.tetrahedra, (6, 6, 6))
+    >>> levels = [0.0, 100.0]  # every voxel reads 100: no votes for level 0
+    >>> own_vote_share(np.full((6, 6, 6), 100.0), ov, np.zeros(6, int), levels, [0, 5]).tolist()
+    [0.0, 0.0]
     """
     vol = np.asarray(volume_255, float)
     which = np.asarray(which, np.int64)

@@ -285,8 +285,8 @@ def relabel_partial_volume_pieces(f, material, levels, adjacency, size, interior
 
 
 def _pieces_round(f, mat, level, adj, size, interior, max_size, own_share):
-    """One pass of :func:`relabel_partial_volume_pieces` over the pieces as they are."""
-    mat = mat.copy()
+    """One pass of :func:`relabel_partial_volume_pieces` over the pieces as they are (``mat``
+    relabelled in place)."""
     a, b = adj[:, 0], adj[:, 1]
     same = mat[a] == mat[b]
     n_pieces, piece = connected_pieces(np.column_stack([a[same], b[same]]), len(mat))
@@ -306,10 +306,11 @@ def _pieces_round(f, mat, level, adj, size, interior, max_size, own_share):
     nearest = np.where(piece_gray - level[dark] <= level[bright] - piece_gray, dark, bright)
     flip = between & (piece_size < max_size)
     mixed = ~has_interior
-    if own_share is not None and (flip & has_interior).any():
-        el = np.flatnonzero((flip & has_interior)[piece])
+    asked = flip & has_interior
+    if own_share is not None and asked.any():
+        el = np.flatnonzero(asked[piece])
         share = np.bincount(piece[el], size[el] * own_share(el, mat), n_pieces)
-        mixed |= share < PIECE_OWN_SHARE * piece_size
+        mixed |= asked & (share < PIECE_OWN_SHARE * piece_size)
     flip &= mixed
     mat[flip[piece]] = nearest[piece[flip[piece]]]
     return mat, int(flip.sum())
