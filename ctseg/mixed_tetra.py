@@ -88,6 +88,11 @@ TRANSITION_STEP_VOX = 1.5
 """How far along its gradient, each way, :func:`transition_votes` looks from a voxel."""
 
 
+def _nearest_level(values, level):
+    """Index of the level nearest each value."""
+    return np.argmin(np.abs(np.asarray(values)[:, None] - level[None, :]), axis=1)
+
+
 def _index_gradient(vol, idx):
     """Gradient (index units, order z, y, x) of ``vol`` at the flat indices ``idx``: the
     central difference along each axis averaged over the 3 x 3 voxels across it, which
@@ -160,7 +165,7 @@ def transition_votes(volume_255, voxel, level_255, vote):
     step = TRANSITION_STEP_VOX * unit
     lo, hi = (map_coordinates(volume_255, (zyx + sgn * step).T, order=1, mode="nearest")
               for sgn in (-1.0, 1.0))
-    lo_level, hi_level = (np.argmin(np.abs(v[:, None] - level[None, :]), axis=1) for v in (lo, hi))
+    lo_level, hi_level = _nearest_level(lo, level), _nearest_level(hi, level)
     own = volume_255.ravel()[idx]
     b = vote[ask]
     lo_level, hi_level, own = lo_level[inverse], hi_level[inverse], own[inverse]
@@ -173,8 +178,7 @@ def transition_votes(volume_255, voxel, level_255, vote):
 def _vote_shares(vol, overlaps, which, level):
     """(len(which), K): each tetrahedron's share of its voxels' votes for each level."""
     tet, voxel, overlap = overlaps.rows(which)
-    vote = np.argmin(np.abs(vol.ravel()[voxel][:, None] - level[None, :]), axis=1)
-    vote = transition_votes(vol, voxel, level, vote)
+    vote = transition_votes(vol, voxel, level, _nearest_level(vol.ravel()[voxel], level))
     votes = np.zeros((len(which), len(level)))
     np.add.at(votes, (tet, vote), overlap)
     return votes / np.maximum(votes.sum(axis=1, keepdims=True), 1e-300)

@@ -42,6 +42,12 @@ def geometry_from_field_data(data):
     return ImageGeometry(v[0:3], v[3:6], v[6:15].reshape(3, 3)), (int(v[15]), int(v[16]))
 
 
+def gray_array(point_data, array_name=None):
+    """The point array read as the gray values: ``array_name`` if given, else the active
+    scalars (None where there is none)."""
+    return point_data.GetArray(array_name) if array_name else point_data.GetScalars()
+
+
 def image_to_array(image, array_name=None):
     """vtkImageData (one scalar component) -> (array, ImageGeometry).
 
@@ -54,7 +60,7 @@ def image_to_array(image, array_name=None):
     """
     dims = image.GetDimensions()
     pd = image.GetPointData()
-    scalars = pd.GetArray(array_name) if array_name else pd.GetScalars()
+    scalars = gray_array(pd, array_name)
     if scalars is None:
         names = ", ".join(str(pd.GetArrayName(i)) for i in range(pd.GetNumberOfArrays()))
         if array_name:

@@ -4,7 +4,7 @@ from vtkmodules.vtkCommonDataModel import vtkImageData
 from ctseg.beam_hardening import correct_streaks
 
 from .base import CTSegAlgorithm, spec_names
-from .convert import _field_array, _point_array
+from .convert import _field_array, _point_array, gray_array
 
 
 class MetalStreakFilter(CTSegAlgorithm):
@@ -37,8 +37,7 @@ class MetalStreakFilter(CTSegAlgorithm):
         fix = correct_streaks(arr, self.params)
         out = vtkImageData.GetData(out_info, 0)
         out.ShallowCopy(image)
-        chosen = self.gray_array_name()
-        scalars = image.GetPointData().GetArray(chosen) if chosen else image.GetPointData().GetScalars()
+        scalars = gray_array(image.GetPointData(), self.gray_array_name())
         pd = out.GetPointData()
         if scalars.GetName():
             pd.RemoveArray(scalars.GetName())
