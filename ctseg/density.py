@@ -213,25 +213,35 @@ def density_volume(volume, spacing=(1.0, 1.0, 1.0), density_sigma_px=DEFAULTS.de
     >>> rho.shape, bool(rho[:, :, 7:9].mean() > rho[:, :, :4].mean())
     ((8, 16, 16), True)
     """
-    if np.ndim(volume) != 3:
-        raise InputError(f"volume: expected a 3D array (nz, ny, nx), got shape {np.shape(volume)}")
-    vol = as_volume(volume, min_side=2).astype(np.float64, copy=False)
-    sp = check_spacing(spacing)
-    sigma = check("density_sigma_px", density_sigma_px)
-    floor = check("density_floor", density_floor)
-    saturation = check("density_saturation", density_saturation)
-    ridge = check("density_ridge", density_ridge)
+    vol, sp, sigma, floor, saturation, ridge = _checked_volume(
+        volume, spacing, density_sigma_px, density_floor, density_saturation, density_ridge)
     span = float(vol.max() - vol.min())
     if span == 0.0:
         return np.full(vol.shape, floor)
-    vol = (vol - vol.min()) / span
+    mag, size = _volume_gradient((vol - vol.min()) / span, sp, sigma)
+    return _rho_from_gradient(mag, floor, saturation, ridge, size)
+
+
+def _checked_volume(volume, spacing, density_sigma_px, density_floor, density_saturation,
+                    density_ridge):
+    """:func:`density_volume`'s arguments validated: (float64 volume, spacing, sigma,
+    floor, saturation, ridge)."""
+    if np.ndim(volume) != 3:
+        raise InputError(f"volume: expected a 3D array (nz, ny, nx), got shape {np.shape(volume)}")
+    return (as_volume(volume, min_side=2).astype(np.float64, copy=False), check_spacing(spacing),
+            check("density_sigma_px", density_sigma_px), check("density_floor", density_floor),
+            check("density_saturation", density_saturation), check("density_ridge", density_ridge))
+
+
+def _volume_gradient(vol, sp, sigma):
+    """The gradient magnitude of a volume smoothed by ``sigma`` voxels of the finest axis
+    (:func:`density_volume`'s rule), and the ridge window (voxels along z, y, x)."""
     sigma_zyx = sigma * sp.min() / sp[::-1]  # voxels along z, y, x
     smooth = ndimage.gaussian_filter(vol, tuple(sigma_zyx), mode="nearest") if sigma > 0 else vol
     mag = np.empty(smooth.shape)
     _threads.pick(_gradient.gradient_magnitude, _gradient.gradient_magnitude_parallel)(
         np.ascontiguousarray(smooth), mag, float(sp[2]), float(sp[1]), float(sp[0]))
-    size = tuple(2 * int(np.ceil(max(s, 0.5))) + 1 for s in sigma_zyx)
-    return _rho_from_gradient(mag, floor, saturation, ridge, size)
+    return mag, tuple(2 * int(np.ceil(max(s, 0.5))) + 1 for s in sigma_zyx)
 
 
 def flat_pixels(image, flat_sigma_px=DEFAULTS.flat_sigma_px, density_floor=DEFAULTS.density_floor,

@@ -17,7 +17,7 @@ from .params import AUTO, resolve
 from .pipeline import monotone_progress, stage_runner
 from .resources import SITE_3D_BYTES, VOLUME_3D_BYTES_PER_VOXEL, check_memory
 from .labelling3d import label_tetrahedra
-from .stages3d import (cvt_sites_3d, default_n_sites_3d, density_3d,  # noqa: F401 (re-export)
+from .stages3d import (cvt_sites_3d, default_n_sites_3d, density_3d, density_cap,  # noqa: F401
                        n_sites_3d, subpixel_boundary_3d, tetrahedra_3d)
 from .surfaces import material_interfaces, material_surface
 from .tetra_gray import VoxelOverlaps
@@ -197,7 +197,8 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
                  f"meshing a {' x '.join(map(str, image.shape))} volume with {n_sites} sites "
                  "in 3D", "set n_sites or site_rule='area', crop or downsample it, or use "
                  "slices mode")
-    rho = timed("density", 0.05, density_3d, image, p, sp)
+    cap = density_cap(levels, scale)
+    rho = timed("density", 0.05, density_3d, image, p, sp, cap)
     cvt = cvt_sites_3d(rho, p, sp, n_sites=n_sites, timed=timed,
                        progress=lambda it, n: report(0.2 + 0.5 * it / max(n, 1), "cvt"))
     # the density and the voxels' region labels are done with: the labelling's peak is lower
@@ -242,6 +243,7 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
         "levels": labels.levels_report,
         "material_noise_255": float(pixel_sigma),
         "gray_rescale": {"offset": float(scale[0]), "factor": float(scale[1])},
+        "density_cap": cap,
         "times_s": times,
         "peak_memory_mib": peaks,
         "total_time_s": float(sum(times.values())),

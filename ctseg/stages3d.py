@@ -15,6 +15,7 @@ import numpy as np
 from ._validate import check_spacing
 from .cvt3d import coarse_sites_3d, lloyd_cvt_3d
 from .density import density_volume
+from .density_capped import capped_density_volume
 from .errors import InputError, MeshCheckError, ParameterError
 from .params import AUTO, DEFAULTS, resolve
 from .pipeline import DENSITY_KEYS
@@ -81,11 +82,45 @@ def n_sites_3d(volume, params=None):
                             "reason": "n_sites given"}
 
 
-def density_3d(image, params=None, spacing=None):
+def density_3d(image, params=None, spacing=None, cap=None):
     """3D stage 1 (SPEC 9.1): the density volume of ``image`` (nz, ny, nx) with the
-    density parameters (:func:`ctseg.density.density_volume`)."""
+    density parameters (:func:`ctseg.density.density_volume`); with a ``cap`` (input
+    units, :func:`density_cap`), raised where the volume clipped at the cap shows edges
+    that the densest material hides (:func:`ctseg.density_capped.capped_density_volume`)."""
     p = resolve(params)
-    return density_volume(image, _spacing(spacing), **{k: getattr(p, k) for k in DENSITY_KEYS})
+    kwargs = {k: getattr(p, k) for k in DENSITY_KEYS}
+    if cap is None:
+        return density_volume(image, _spacing(spacing), **kwargs)
+    return capped_density_volume(image, cap, _spacing(spacing), **kwargs)
+
+
+def density_cap(levels_255, gray_scale):
+    """The cap of :func:`density_3d`: the second-highest material level, in input units,
+    when there are at least three materials (the densest one's edges can hide a third
+    one's); None otherwise.
+
+    Parameters
+    ----------
+    levels_255 : sequence of float
+        Material levels on the 0-255 scale.
+    gray_scale : (offset, factor)
+        The input's rescaling to that scale, ``gray_255 = (gray - offset) * factor``.
+
+    Returns
+    -------
+    cap : float or None
+
+    Example
+    -------
+    >>> density_cap([20.0, 200.0, 80.0], (1000.0, 0.1))
+    1800.0
+    >>> density_cap([20.0, 200.0], (1000.0, 0.1)) is None
+    True
+    """
+    if len(levels_255) < 3:
+        return None
+    offset, factor = gray_scale
+    return float(np.sort(np.asarray(levels_255, float))[-2] / factor + offset)
 
 
 def cvt_sites_3d(rho, params=None, spacing=None, *, n_sites=None, progress=None, timed=None):
