@@ -37,8 +37,11 @@ class DensityMapFilter(CTSegAlgorithm):
     Input: a vtkImageData. One slice (z dimension 1): :func:`ctseg.density_map` in pixel
     units, as the slices mode makes it. A volume (at least 2 voxels along every axis):
     :func:`ctseg.stages3d.density_3d` (:func:`ctseg.density.density_volume` with the
-    image's spacing), as the 3D mode makes it. Output: the input image (shallow copy) with a
-    ``density`` point array (float64), for CVTSitesFilter.
+    image's spacing); the 3D mode then raises it below the densest material's level
+    (:func:`ctseg.density_capped.capped_density_volume`), which needs the material levels
+    that only the labelling stage finds, so this stage's density is the unraised one.
+    Output: the input image (shallow copy) with a ``density`` point array (float64), for
+    CVTSitesFilter.
     Parameters: the spec's density group (``ctseg params``): DensitySigma, DensityFloor,
     DensitySaturation, DensityRidge, each with Set/Get and through
     SetParameter(name, value).

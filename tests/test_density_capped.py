@@ -2,10 +2,11 @@
 3D pipeline."""
 import numpy as np
 import pytest
+from scipy import ndimage
 
 import ctseg.pipeline3d as pipeline3d
 from ctseg.density import density_volume
-from ctseg.density_capped import CAP_MARGIN_PX, capped_density_volume
+from ctseg.density_capped import CAP_MARGIN_PX, _near, capped_density_volume
 from ctseg.errors import InputError
 from ctseg.levels import volume_levels
 from ctseg.params import resolve
@@ -94,3 +95,13 @@ def test_pipeline_meshes_the_raised_density_with_three_or_more_materials(monkeyp
     expected = capped_density_volume(seen["image"], seen["cap"], ph.spacing)
     np.testing.assert_array_equal(seen["rho"], expected)
     assert (expected > density_volume(seen["image"], ph.spacing)).any()
+
+
+@pytest.mark.parametrize("spacing_zyx", [(1.0, 1.0, 1.0), (2.0, 1.0, 1.3), (0.7, 1.9, 1.0)])
+def test_near_is_the_distance_transform_within_a_radius(spacing_zyx):
+    rng = np.random.default_rng(3)
+    for share in (0.002, 0.05, 0.3):
+        mask = rng.random((9, 11, 13)) < share
+        for radius in (0.5, 1.0, 2.5, 3.2):
+            expected = ndimage.distance_transform_edt(~mask, sampling=spacing_zyx) <= radius
+            np.testing.assert_array_equal(_near(mask, radius, spacing_zyx), expected)
