@@ -82,9 +82,9 @@ def parse_overrides(items):
 
 def summary(rows, names):
     out = []
-    groups = sorted({(str(r["size"]), r["seed"], r["capped"]) for r in rows})
+    groups = list(dict.fromkeys((r["size"], r["seed"], r["capped"]) for r in rows))  # run order
     for size, seed, capped in groups:
-        g = [r for r in rows if (str(r["size"]), r["seed"], r["capped"]) == (size, seed, capped)]
+        g = [r for r in rows if (r["size"], r["seed"], r["capped"]) == (size, seed, capped)]
         dice = np.array([r["dice"] for r in g])
         cols = [f"{m:.3f} ± {s:.3f}" for m, s in zip(dice.mean(0), dice.std(0))]
 

@@ -100,7 +100,7 @@ class CVTParams(_Group):
     overrelaxation_3d: float = _param(1.0, "float", "the 3D Lloyd moves a free site this many times the way to "
                                       "its centroid (1 = Lloyd's step; below 2 the energy still never increases)",
                                       low=1.0, high=2.0, high_open=True, vtk="OverRelaxation3D")
-    fine_iter_3d: int = _param(20, "int", "the 3D Lloyd runs first on 2 x 2 x 2 voxel blocks, then at most this "
+    fine_iter_3d: int = _param(10, "int", "the 3D Lloyd runs first on 2 x 2 x 2 voxel blocks, then at most this "
                                "many iterations on the voxels (0 = on the voxels only, to max_iter)",
                                low=0, high=100_000, vtk="FineIterations3D")
 
