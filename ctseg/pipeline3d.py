@@ -134,7 +134,11 @@ def segment_volume_3d(volume, params=None, *, spacing=None, progress=None, **ove
     The material levels are the volume's (:func:`ctseg.levels.volume_levels`); with
     ``streak_correction`` every z slice through metal is first corrected against them,
     as in slices mode, once a probe of every 4th such slice finds streaks
-    (:func:`ctseg.beam_hardening.correct_streaks_volume`). Where the flat voxels hold
+    (:func:`ctseg.beam_hardening.correct_streaks_volume`). With three or more levels the
+    density is raised where the volume clipped at the second-highest level shows edges
+    that the densest material's hide (:func:`ctseg.stages3d.density_cap`,
+    :func:`ctseg.density_capped.capped_density_volume`; ``diagnostics["density_cap"]``).
+    Where the flat voxels hold
     partial volume (their spread more than twice the tetrahedra's), the labelling takes
     the levels of the tetrahedron grays instead, and a level that the homogeneous
     tetrahedra (voxels spreading as the noise) show between two levels, and none
