@@ -22,7 +22,7 @@ def resume_hint(folder):
     stopped before a slice was done: nothing to resume, nothing left behind)."""
     if not folder or not os.path.isdir(folder):
         return ""
-    n = sum(1 for f in os.listdir(folder) if f.startswith("slice_") and f.endswith(".npz"))
+    n = sum(1 for f in os.listdir(folder) if _slice_index(f) is not None)
     if not n:
         shutil.rmtree(folder, ignore_errors=True)
         return ""
@@ -75,15 +75,32 @@ class Checkpoint:
                 json.dump(self.meta, fh)
         done = {}
         for name in sorted(os.listdir(self.folder)):
-            if name.startswith("slice_") and name.endswith(".npz"):
-                done[int(name[6:-4])] = _load_slice(os.path.join(self.folder, name))
+            k = _slice_index(name)
+            if k is not None:
+                done[k] = _load_slice(os.path.join(self.folder, name))
         return done
 
     def save(self, k, seg):
         path = os.path.join(self.folder, f"slice_{k:05d}.npz")
         tmp = path + ".tmp.npz"
-        _save_slice(tmp, seg)
+        try:
+            _save_slice(tmp, seg)
+        except BaseException as exc:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+            # Ctrl-C inside numpy's zip writer comes out as zipfile's ValueError about an
+            # open handle, raised while the KeyboardInterrupt was handled: still a Ctrl-C
+            if not isinstance(exc, KeyboardInterrupt) and isinstance(exc.__context__, KeyboardInterrupt):
+                raise KeyboardInterrupt from None
+            raise
         os.replace(tmp, path)
+
+
+def _slice_index(name):
+    """The slice index of a finished slice's file name (slice_NNNNN.npz), else None (a
+    half-written .tmp.npz among them)."""
+    stem = name[6:-4]
+    return int(stem) if name.startswith("slice_") and name.endswith(".npz") and stem.isdigit() else None
 
 
 _SLICE_ARRAYS = ("points", "triangles", "material", "gray", "boundary_edges",

@@ -167,7 +167,8 @@ def order_by_gray(material, gray, area):
     Returns
     -------
     material : (m,) int64 ndarray
-    mean_gray : (K,) ndarray, ascending
+    mean_gray : (K,) ndarray, ascending; equal means (a mixture's can equal another
+        material's) keep the order of their input labels
     old_ids : (K,) ndarray, the input label of each new material
     """
     used, inv = np.unique(np.asarray(material), return_inverse=True)

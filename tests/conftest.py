@@ -1,7 +1,17 @@
+import os
+
 import numpy as np
 import pytest
+from hypothesis import settings
 
 from ctseg.phantoms import make_phantom
+
+# The property tests draw the same examples on every run, so that CI passes or fails on
+# the code alone; CTSEG_HYPOTHESIS=explore draws new ones (run it locally to look for
+# counterexamples, and add each one found with @example).
+settings.register_profile("ci", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("CTSEG_HYPOTHESIS", "ci"))
 
 
 @pytest.fixture(scope="session")

@@ -6,6 +6,7 @@ import sys
 import numpy as np
 import pytest
 
+import ctseg
 from ctseg.cli import main
 from ctseg.filters import polydata_to_arrays, read_polydata
 from ctseg.meshcheck import mesh_check_report
@@ -255,3 +256,33 @@ def test_per_material_files_left_by_an_earlier_run_are_named(slice_files, capsys
     assert (d / "m_material2.stl").read_text() == "old"
     assert main(["mesh", str(d / "slice.npy"), "-o", str(d / "n.stl"), "--sites", "150"]) == 0
     assert "note:" not in capsys.readouterr().out
+
+
+def test_ctrl_c_while_a_checkpoint_slice_is_written(tmp_path, monkeypatch):
+    """A Ctrl-C inside numpy's zip writer surfaces as zipfile's ValueError ("Can't close the
+    ZIP file while there is an open writing handle"): the save raises KeyboardInterrupt (the
+    CLI's exit 130), leaves no half-written file, and a later run resumes past a stray one."""
+    import ctseg.checkpoint as checkpoint
+    from ctseg.params import resolve
+
+    vol = make_volume(2, 24, seed=1).image
+    seg = ctseg.segment_image(vol[0], n_sites=30)
+    ck = checkpoint.Checkpoint(tmp_path / "ck", vol, resolve(None))
+    assert ck.load() == {}
+    ck.save(0, seg)
+
+    def interrupted(path, seg):
+        with open(path, "wb") as fh:
+            fh.write(b"PK half")
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise ValueError("Can't close the ZIP file while there is an open writing handle") from None
+
+    monkeypatch.setattr(checkpoint, "_save_slice", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        ck.save(1, seg)
+    assert sorted(os.listdir(tmp_path / "ck")) == ["meta.json", "slice_00000.npz"]
+    (tmp_path / "ck" / "slice_00001.npz.tmp.npz").write_bytes(b"PK half")  # killed harder
+    assert list(checkpoint.Checkpoint(tmp_path / "ck", vol, resolve(None)).load()) == [0]
+    assert "1 finished slice(s)" in checkpoint.resume_hint(tmp_path / "ck")
