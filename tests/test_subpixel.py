@@ -288,8 +288,10 @@ def test_volume_pipeline_moves_vertices_onto_a_sphere_and_keeps_labels():
     dist = lambda p: np.abs(np.linalg.norm(p - centre, axis=1) - radius)
     iface = np.unique(on.interfaces)
     # the moved vertices land on the sphere; the coarse-to-fine CVT already puts the
-    # interface vertices near it (0.17 voxel), so all of them gain less (0.13)
-    assert dist(on.points[went]).mean() < 0.5 * dist(off.points[went]).mean()
+    # interface vertices near it (0.17 voxel), so all of them gain less (0.13). With 10
+    # voxel Lloyd iterations the moved ones go 0.150 -> 0.052 voxel, and 0.197 -> 0.104 on
+    # the oldest supported versions (numpy 1.24), whose mesh differs
+    assert dist(on.points[went]).mean() < min(0.6 * dist(off.points[went]).mean(), 0.15)
     assert dist(on.points[iface]).mean() < dist(off.points[iface]).mean()
     assert on.diagnostics["element_quality"]["min_dihedral_deg"] >= 5.0 - 1e-9
     for s in on.surfaces:
