@@ -1,6 +1,6 @@
 """Compiled kernels (numba) of :mod:`ctseg.cvt3d`: the exact nearest-site search on a 3D
 site grid, the voxel assignment kept up to date by Hamerly-style bounds on the two
-nearest sites, and the per-region sums.
+nearest sites, and the per-region sums (the first, full assignment: :mod:`ctseg._assign3d`).
 
 Voxel (k, j, i) is the point (i sx, j sy, k sz); flat index (k ny + j) nx + i. Private:
 :func:`ctseg.cvt3d.lloyd_cvt_3d` is the entry point.
@@ -159,26 +159,6 @@ def _scan(x, y, z, coords, items, lo, hi, best):
         elif d < b3 or (d == b3 and k < i3):
             b3, i3 = d, k
     return b1, i1, b2, i2, b3, i3
-
-
-@njit(cache=True, parallel=True)
-def _assign_3d(nz, ny, nx, sx, sy, sz, sites, labels, second, u, l2, l3):
-    """Exact nearest site (labels, distance u), second nearest (second, distance l2) and
-    third-nearest distance (l3) of every voxel centre (slices in parallel: each voxel's
-    result is its own, so the thread count changes nothing)."""
-    h, gx, gy, gz, start, items, coords = _site_grid_3d(sites, (nx - 1) * sx, (ny - 1) * sy,
-                                                        (nz - 1) * sz)
-    for k in prange(nz):
-        for j in range(ny):
-            for i in range(nx):
-                v = (k * ny + j) * nx + i
-                i1, d1, i2, d2, d3 = _three_nearest_3d(i * sx, j * sy, k * sz, h, gx, gy, gz,
-                                                       start, items, coords)
-                labels[v] = i1
-                second[v] = i2
-                u[v] = _up(d1)
-                l2[v] = _down(d2)
-                l3[v] = _down(d3)
 
 
 _SUM_SLABS = 4

@@ -7,7 +7,8 @@ from scipy.spatial import cKDTree
 
 from ._box3d import (CORNER, EDGE, FACE, FREE, SITE_CLASSES, border_voxels, box_features,  # noqa: F401
                      feature_tables, start_sites)
-from ._cvt3d import _assign_3d, _nearest_many_3d, _own_feature_sums_3d, _reassign_3d, _region_sums_3d
+from ._assign3d import _assign_3d
+from ._cvt3d import _nearest_many_3d, _own_feature_sums_3d, _reassign_3d, _region_sums_3d
 from ._validate import check_spacing
 from .errors import InputError, ParameterError
 from .params import DEFAULTS, check

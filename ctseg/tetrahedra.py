@@ -13,9 +13,10 @@ from .errors import MeshCheckError
 # up to round-off: four sites on one face of the box, cocircular)
 FLAT_REL = 1e-10
 
-QHULL_OPTIONS = "Qbb Qc Qz Q12 Qt"
-"""Qhull's options for the Delaunay tetrahedra (Qz: a point at infinity, for the
-cospherical sites of near-regular sets; Qt: triangulated output)."""
+QHULL_OPTIONS = "Qbb Qc Q12 Qt"
+"""Qhull's options for the Delaunay tetrahedra (Qt: triangulated output). Qhull sees a
+slightly moved copy of the sites (:mod:`ctseg._retet`), so no four are exactly cospherical;
+the exact sites, where they must be triangulated, get Qz as well."""
 
 SLIVER_STEP = 0.1
 """Largest move of a sliver's vertex in :func:`perturb_slivers`, as a share of its

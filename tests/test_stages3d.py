@@ -6,7 +6,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 from ctseg import density_map
-from ctseg._cvt3d import _assign_3d, _local_drift_3d, _nearest_many_3d, _reassign_3d, _site_grid_3d
+from ctseg._assign3d import _assign_3d
+from ctseg._cvt3d import _local_drift_3d, _nearest_many_3d, _reassign_3d, _site_grid_3d
 from ctseg.cvt3d import CORNER, EDGE, FACE, FREE, _not_coincident, coarse_sites_3d, lloyd_cvt_3d
 from ctseg.density import density_volume
 from ctseg.errors import InputError, ParameterError
@@ -364,6 +365,42 @@ def test_nearest_site_kernel_matches_brute_force(layout):
         pts = rng.choice(11, (2000, 3)).astype(float)
     d = np.sqrt(((pts[:, None] - sites[None]) ** 2).sum(-1))
     assert np.array_equal(_nearest_many_3d(pts, sites), np.argmin(d, axis=1))
+
+
+@pytest.mark.parametrize("layout", ["uniform", "clustered", "ties", "one", "two", "three"])
+def test_full_assignment_matches_brute_force(layout):
+    """The block-by-block search of every voxel's three nearest sites against all the
+    distances sorted by (distance, index): nearest and second exactly (ties to the lower
+    index), u, l2 and l3 bounds within float32 rounding. Clustered sites leave blocks far
+    from any site; anisotropic spacing makes the blocks unequal along the axes."""
+    shape, sp = (13, 17, 21), np.array([1.0, 0.6, 1.7])
+    hi = box_of(shape, sp)
+    rng = np.random.default_rng(5)
+    n = {"one": 1, "two": 2, "three": 3}.get(layout, 120)
+    sites = rng.uniform(0, 1, (n, 3)) * hi
+    if layout == "clustered":
+        sites = np.clip(hi * 0.2 + rng.normal(0, 1.0, (n, 3)), 0, hi)
+    if layout == "ties":  # half-voxel positions: many voxels equidistant from two sites
+        sites = np.clip(np.round(sites / (0.5 * sp)) * (0.5 * sp), 0, hi)
+    sites = np.unique(sites, axis=0)
+    labels, second, u, l2, l3 = arrays = kernel_state(int(np.prod(shape)))
+    _assign_3d(*shape, *sp, sites, *arrays)
+    c = voxel_centres(shape, sp)
+    sq = ((c[:, None, :] - sites[None]) ** 2).sum(-1)  # squared, as the kernel compares them
+    order = np.lexsort((np.broadcast_to(np.arange(len(sites)), sq.shape), sq), axis=1)
+    d = np.sqrt(sq)
+    assert np.array_equal(labels, order[:, 0])
+    ds = np.take_along_axis(d, order, axis=1)
+    inf = np.full(len(c), np.inf)
+    d2, d3 = (ds[:, 1], ds[:, 2] if len(sites) > 2 else inf) if len(sites) > 1 else (inf, inf)
+    if len(sites) > 1:
+        assert np.array_equal(second, order[:, 1])
+    for bound, exact, up in ((u, ds[:, 0], True), (l2, d2, False), (l3, d3, False)):
+        b = bound.astype(np.float64)
+        assert np.all(b >= exact) if up else np.all(b <= exact)
+        fin = np.isfinite(exact)
+        assert np.array_equal(np.isfinite(b), fin)
+        assert np.allclose(b[fin], exact[fin], rtol=1e-6, atol=1e-6)
 
 
 def test_cvt_rejects_bad_input():
