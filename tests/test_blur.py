@@ -65,6 +65,32 @@ def test_estimate_blur_recovers_a_known_blur(sigma):
     assert abs(est - sigma) < 0.1
 
 
+@pytest.mark.parametrize("sigma", [0.5, 1.3, 2.7])
+def test_blur_on_chosen_slices_is_the_full_blur_there(sigma):
+    from ctseg.blur import _blurred_slices, _fit_slices
+    vol = np.random.default_rng(1).normal(0, 1, (140, 9, 11))
+    slices = _fit_slices(len(vol))
+    assert len(slices) == 70 and slices[0] == 1 and np.all(np.diff(slices) == 2)
+    want = ndimage.gaussian_filter(vol, sigma, mode="nearest")[slices]
+    np.testing.assert_allclose(_blurred_slices(vol, sigma, slices), want, rtol=0, atol=1e-12)
+
+
+def test_volume_blur_fitted_on_some_slices_as_on_all(monkeypatch):
+    """A 132-slice volume is compared on every other slice: the fitted blur is that of
+    all the slices, and the true one."""
+    import ctseg.blur as blur
+    n, sigma = (132, 40, 40), 1.2
+    z, y, x = np.indices(n, dtype=float)
+    level = np.where((x - 19.3) ** 2 + (y - 20.6) ** 2 < 11.4 ** 2, 180.0, 30.0)
+    level[np.abs(z - 70.2 + 0.3 * x) < 6.1] = 90.0  # a tilted plate: edges across the slices
+    vol = ndimage.gaussian_filter(level, sigma, mode="nearest")
+    vol += np.random.default_rng(2).normal(0, 3.0, n)
+    some = estimate_blur(vol, level)
+    monkeypatch.setattr(blur, "_FIT_SLICES", 10 ** 6)
+    every = estimate_blur(vol, level)
+    assert abs(some - every) < 0.02 and abs(every - sigma) < 0.05
+
+
 def test_estimate_blur_edge_cases():
     flat = np.full((10, 10), 5.0)
     assert estimate_blur(flat + np.random.default_rng(0).normal(0, 1, flat.shape), flat) == 0.0
