@@ -30,6 +30,9 @@ _FIT_SLICES = 64
 """A volume with at least twice this many slices is fitted on every ``nz // _FIT_SLICES``-th
 slice: the one number fitted needs no more voxels, and each blur is computed on those
 slices alone."""
+_FIT_MIN_VOXELS = 100_000
+"""Fewer band voxels than this on those slices (level changes between them only, as at
+an interface across z): every slice is fitted."""
 
 
 def _fit_slices(nz):
@@ -134,7 +137,8 @@ def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_
     [0, ``blur_max_px``], scanned upwards until the misfit has risen twice in a row past
     its smallest value (it has one minimum), then two parabola fits around its best point
     (to within about 0.02 px of a fine search on the simulated slices). A volume of
-    ``nz >= 128`` slices is compared on every ``nz // 64``-th slice only.
+    ``nz >= 128`` slices is compared on every ``nz // 64``-th slice only, where those
+    hold 100 000 band voxels or more.
 
     Parameters
     ----------
@@ -176,6 +180,8 @@ def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_
         return 0.0
     band = ndimage.binary_dilation(change, iterations=band_px)
     slices = _fit_slices(len(lev)) if lev.ndim == 3 else np.arange(len(lev))
+    if np.count_nonzero(band[slices]) < _FIT_MIN_VOXELS:
+        slices = np.arange(len(lev))
     band = band[slices]
     target = img[slices][band]
 

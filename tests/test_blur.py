@@ -91,6 +91,20 @@ def test_volume_blur_fitted_on_some_slices_as_on_all(monkeypatch):
     assert abs(some - every) < 0.02 and abs(every - sigma) < 0.05
 
 
+def test_volume_blur_fitted_on_every_slice_where_the_sampled_ones_miss_the_edges(monkeypatch):
+    """An interface across z between two sampled slices: their band is empty, so every
+    slice is fitted (not a mean over no voxel)."""
+    import ctseg.blur as blur
+    monkeypatch.setattr(blur, "_FIT_SLICES", 8)  # 140 slices: every 17th, from slice 8
+    monkeypatch.setattr(blur, "_FIT_MIN_VOXELS", 1)
+    level = np.full((140, 30, 30), 20.0)
+    level[67:] = 120.0  # band: slices 64-69, none of them sampled
+    assert not np.isin(np.arange(64, 70), blur._fit_slices(140)).any()
+    vol = ndimage.gaussian_filter(level, 1.5, mode="nearest")
+    vol += np.random.default_rng(3).normal(0, 2.0, vol.shape)
+    assert abs(estimate_blur(vol, level) - 1.5) < 0.05
+
+
 def test_estimate_blur_edge_cases():
     flat = np.full((10, 10), 5.0)
     assert estimate_blur(flat + np.random.default_rng(0).normal(0, 1, flat.shape), flat) == 0.0
