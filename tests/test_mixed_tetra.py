@@ -97,23 +97,43 @@ def test_noise_alone_changes_nothing():
 
 
 def test_sample_volume_polymer_gains(monkeypatch):
+    """On the sample volume the rule's relabelled tetrahedra become right: most of them
+    take the material that holds most of their true volume, which few held before, and
+    no material's Dice drops. (Its Dice gain for the polymer is not a fixed margin: the
+    same rule gave 0.696 -> 0.739 with numpy 2.4 and 0.773 -> 0.781 with numpy 1.24,
+    whose last bits give other sites and so another mesh.)"""
+    import importlib
+
     import nrrd
+
+    from ctseg.tetra_gray import VoxelOverlaps
 
     image, _ = nrrd.read(os.path.join(ROOT, "sample_data", "part_volume.nrrd"), index_order="C")
     truth = np.load(os.path.join(ROOT, "sample_data", "part_volume_truth.npy"))
+    labelling3d = importlib.import_module("ctseg.labelling3d")
+    seen = {}
+
+    def recorded(vol255, points, tetrahedra, material, *args, **kwargs):
+        out = relabel_mixed(vol255, points, tetrahedra, material, *args, **kwargs)
+        seen.update(points=points, tetrahedra=tetrahedra, before=np.array(material), after=out[0])
+        return out
+
+    monkeypatch.setattr(labelling3d, "relabel_mixed", recorded)
     seg = segment_volume_3d(image)
     with_rule = evaluate_tetra(seg, truth)["dice"]
-    assert seg.diagnostics["relabelled_mixed"] > 0
+    assert seg.diagnostics["relabelled_mixed"] > 0 and len(seg.material_gray) == truth.max() + 1
+    # the true material of each tetrahedron: the one holding most of its volume
+    overlaps = VoxelOverlaps(seen["points"], seen["tetrahedra"], truth.shape)
+    share = np.stack([overlaps.tetra_mean((truth == m).astype(float))
+                      for m in range(truth.max() + 1)], axis=1)
+    changed = np.flatnonzero(seen["before"] != seen["after"])
+    right_before = np.sum(seen["before"][changed] == share[changed].argmax(axis=1))
+    right_after = np.sum(seen["after"][changed] == share[changed].argmax(axis=1))
+    # measured with numpy 2.4: 375 relabelled, 15 right before, 348 after
+    assert right_after >= 0.7 * len(changed) and right_after >= 3 * right_before
     monkeypatch.setattr(ctseg.mixed_tetra, "MIXED_OWN_SHARE", 0.0)  # the rule off
     without = evaluate_tetra(segment_volume_3d(image), truth)["dice"]
-    # measured 0.982 / 0.682 / 0.965 / 0.933 with, 0.979 / 0.548 / 0.960 / 0.933 without;
-    # since relabel_beyond_iso50 follows it, 0.982 / 0.690 / 0.967 / 0.933 with and a
-    # polymer of 0.620 without (the ISO-50 rule takes some of the same tetrahedra); since
-    # the BLAS-free sums moved the levels' last bits, polymer 0.715 with and 0.647 without
-    # (numpy 2.4), 0.652 and 0.610 (numpy 1.24): a gain of 0.04-0.07, none without the rule;
-    # since the partial-volume pieces rule follows too (it takes some of the same
-    # tetrahedra), 0.702 with and 0.683 without (numpy 2.4), 0.767 and 0.753 (numpy 1.24)
-    assert with_rule[1] > without[1] + 0.01
+    assert with_rule[1] > without[1]
     assert np.all(np.array(with_rule) >= np.array(without) - 0.01)
 
 
