@@ -44,8 +44,6 @@ def _fit_slices(nz):
 def _blurred_slices(volume, sigma, slices):
     """``gaussian_filter(volume, sigma, mode="nearest")[slices]``, computed on those slices
     only (the Gaussian is separable: along axis 0 a weighted sum of nearby slices)."""
-    if len(slices) == len(volume):
-        return ndimage.gaussian_filter(volume, sigma, mode="nearest")
     radius = int(4.0 * sigma + 0.5)  # ndimage's kernel: truncate 4, normalised
     offsets = np.arange(-radius, radius + 1)
     weights = np.exp(-0.5 * (offsets / sigma) ** 2)
@@ -179,16 +177,21 @@ def estimate_blur(image, levels_image, band_px=3, blur_max_px=DEFAULTS.blur_max_
     if not change.any():
         return 0.0
     band = ndimage.binary_dilation(change, iterations=band_px)
-    slices = _fit_slices(len(lev)) if lev.ndim == 3 else np.arange(len(lev))
-    if np.count_nonzero(band[slices]) < _FIT_MIN_VOXELS:
-        slices = np.arange(len(lev))
-    band = band[slices]
-    target = img[slices][band]
+    slices = _fit_slices(len(lev)) if lev.ndim == 3 else None  # None: every slice, uncopied
+    if slices is not None and (len(slices) == len(lev)
+                               or np.count_nonzero(band[slices]) < _FIT_MIN_VOXELS):
+        slices = None
+    if slices is not None:
+        band, img = band[slices], img[slices]
+    target = img[band]
 
     seen = {}  # the first parabola's three points are grid points: blur each width once
 
     def fit(s):
-        model = _blurred_slices(lev, s, slices) if s > 0 else lev[slices]
+        if slices is None:
+            model = ndimage.gaussian_filter(lev, s, mode="nearest") if s > 0 else lev
+        else:
+            model = _blurred_slices(lev, s, slices) if s > 0 else lev[slices]
         return float(np.mean((target - model[band]) ** 2))
 
     def misfits(widths):  # the new ones side by side (ndimage releases the GIL)
