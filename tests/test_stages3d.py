@@ -390,9 +390,9 @@ def test_full_assignment_matches_brute_force(layout):
     order = np.lexsort((np.broadcast_to(np.arange(len(sites)), sq.shape), sq), axis=1)
     d = np.sqrt(sq)
     assert np.array_equal(labels, order[:, 0])
-    ds = np.take_along_axis(d, order, axis=1)
-    inf = np.full(len(c), np.inf)
-    d2, d3 = (ds[:, 1], ds[:, 2] if len(sites) > 2 else inf) if len(sites) > 1 else (inf, inf)
+    # sorted distances, inf where there are fewer than three sites
+    ds = np.hstack([np.take_along_axis(d, order, axis=1), np.full((len(c), 2), np.inf)])
+    d2, d3 = ds[:, 1], ds[:, 2]
     if len(sites) > 1:
         assert np.array_equal(second, order[:, 1])
     for bound, exact, up in ((u, ds[:, 0], True), (l2, d2, False), (l3, d3, False)):
